@@ -1,0 +1,67 @@
+"""The ``kinred`` command: a thin layer over :mod:`kinred.experiments` and friends.
+
+Each sub-command lives in a module of :mod:`kinred.commands` exposing
+
+* ``NAME`` -- the sub-command's name,
+* ``HELP`` -- one line of help,
+* ``add_arguments(parser)`` -- declare its options,
+* ``run(args) -> int`` -- do the work, return the exit code.
+
+Errors derived from :class:`kinred.errors.KinredError` are printed as one line on stderr
+(``kinred: error: ...``) with exit code 2 and no traceback; an interrupt exits with 130 and
+says how to resume where the command supports it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import KinredError
+
+__all__ = ["main", "build_parser"]
+
+#: Modules of :mod:`kinred.commands`, in the order ``kinred --help`` lists them.
+COMMAND_MODULES: tuple[str, ...] = (
+    "kinred.commands.quantize",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser (sub-commands loaded from :data:`COMMAND_MODULES`)."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="kinred",
+        description="Interacting agents in high dimension, random projections and kinetic limits.",
+    )
+    parser.add_argument("--version", action="version", version=f"kinred {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for modname in COMMAND_MODULES:
+        mod = importlib.import_module(modname)
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``kinred`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = args._run(args)
+    except KinredError as exc:
+        print(f"kinred: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("kinred: interrupted; finished results are on disk (use --resume where offered)",
+              file=sys.stderr)
+        return 130
+    return 0 if code is None else int(code)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Sub-commands of the ``kinred`` CLI (see :mod:`kinred.cli` for the module protocol)."""

@@ -1,0 +1,62 @@
+"""One exception family for kinred.
+
+Every error kinred raises on purpose derives from :class:`KinredError`. Messages name the
+argument, the bad value and what would be valid, e.g.
+``InvalidInput: beta must be >= 0, got -1.0``.
+
+The subclasses also derive from the closest built-in exception (``ValueError``,
+``FloatingPointError``, ...) so that generic ``except ValueError`` code keeps working.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "KinredError",
+    "InvalidInput",
+    "ConfigError",
+    "SimulationDiverged",
+    "NotConverged",
+    "TooLarge",
+    "NotProjectable",
+]
+
+
+class KinredError(Exception):
+    """Base class of every error raised by kinred."""
+
+
+class InvalidInput(KinredError, ValueError):
+    """An argument has the wrong type, shape or value (NaN/Inf, negative width, ...)."""
+
+
+class ConfigError(InvalidInput):
+    """A scene or measure file is malformed: unknown, missing or mistyped key."""
+
+
+class SimulationDiverged(KinredError, FloatingPointError):
+    """A simulation produced NaN/Inf or overflowed.
+
+    Attributes
+    ----------
+    t : float
+        Time at which the non-finite state was detected.
+    step : int
+        Index of the step that produced it.
+    """
+
+    def __init__(self, message: str, *, t: float | None = None, step: int | None = None):
+        super().__init__(message)
+        self.t = t
+        self.step = step
+
+
+class NotConverged(KinredError, RuntimeError):
+    """An iterative solver stopped before reaching its tolerance (e.g. POT's ``numItermax``)."""
+
+
+class TooLarge(KinredError, MemoryError):
+    """A request would materialize more memory than the configured limit allows."""
+
+
+class NotProjectable(KinredError, TypeError):
+    """An effect does not belong to the paper's class (1.1) and cannot be projected exactly."""
