@@ -1,5 +1,33 @@
-"""Johnson–Lindenstrauss projections (Lemma 2.1 of the paper and the matrices after it)."""
+"""Johnson–Lindenstrauss projections (Lemma 2.1 of the paper and the matrices after it).
+
+* :func:`jl_matrix` draws ``M: ℝᵈ → ℝᵏ`` of kind ``"gaussian"``, ``"rademacher"``,
+  ``"achlioptas"`` (sparse), ``"srht"`` (fast Walsh–Hadamard, Krahmer–Ward) or ``"dct"``;
+* :func:`jl_min_dim` is the Dasgupta–Gupta bound on ``k``;
+* :func:`distortion` and :func:`trajectory_distortion` measure eq. (2.1) on a cloud and
+  condition (3.4) along a trajectory.
+"""
 
 from ._base import DenseProjection, Projection, as_projection
+from ._distortion import (
+    DistortionResult,
+    TrajectoryDistortionResult,
+    distortion,
+    trajectory_distortion,
+)
+from ._jl import KINDS, SparseProjection, SRHTProjection, fwht, jl_matrix, jl_min_dim
 
-__all__ = ["Projection", "DenseProjection", "as_projection"]
+__all__ = [
+    "Projection",
+    "DenseProjection",
+    "SparseProjection",
+    "SRHTProjection",
+    "as_projection",
+    "KINDS",
+    "jl_matrix",
+    "jl_min_dim",
+    "fwht",
+    "distortion",
+    "trajectory_distortion",
+    "DistortionResult",
+    "TrajectoryDistortionResult",
+]

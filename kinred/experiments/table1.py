@@ -1,0 +1,306 @@
+"""The paper's Table 1 and Figures 1–3: flocking detected from projected simulations (§3.4.1).
+
+Setting (§3.4.1 of the paper): N = 1000 agents in d = 200, x⁰ ~ U[0,1]ᵈ and v⁰ ~ U[−1,1]ᵈ
+componentwise, Cucker–Smale alignment eq. (2.12)–(2.13) with g(s) = G/(1+s²)^β,
+β ∈ {1.5, 1.62, 1.7}, 1500 forward-Euler steps of h = 0.02 (eq. (2.14)–(2.15)). For every β:
+the original system in ℝ²⁰⁰ and, for each k ∈ {150, 100, 50, 25, 10, 5, 2}, twenty simulations
+projected by independent Gaussian JL matrices (eq. (2.4)–(2.5)). Each run is classified by the
+paper's rule on Γ(30): < 1e-10 flocking ("pos"), > 1e-3 no flocking ("neg"), otherwise "n/a".
+
+Coupling convention
+-------------------
+The paper writes the mean 1/N in front of the sum in (2.13) but does not state G. With the mean
+and G = 1 the original system never flocks in this setting (Γ stays ≈ 66). The paper's pattern
+(flocking at β = 1.5 and 1.62, none at 1.7) is reproduced by the plain sum (coefficient 1 per
+agent) with G = 0.8, which is what :class:`Table1Config` uses by default
+(``normalize="sum", G=0.8``); both are recorded in ``table1.json``. The reduced ``quick``
+configuration keeps the mean-field strength N·G of that setting (G = 0.8·1000/N).
+
+All members share the initial data (drawn from ``data_seed``); member ``i`` draws its projection
+from ``kinred._rng.member_seed(seed, i)``, so the table does not depend on the executor or the
+number of workers, and an interrupted run resumes from its results store.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._validate import as_choice, as_float, as_int
+from ..errors import InvalidInput
+
+__all__ = ["Table1Config", "Table1Result", "run", "member", "PAPER_TABLE1", "format_table"]
+
+#: Table 1 of the paper: {beta: {dim: (pos, neg, n/a)}}.
+PAPER_TABLE1 = {
+    1.5: {200: (1, 0, 0), 150: (20, 0, 0), 100: (20, 0, 0), 50: (20, 0, 0), 25: (20, 0, 0),
+          10: (14, 0, 6), 5: (4, 4, 12), 2: (3, 8, 9)},
+    1.62: {200: (1, 0, 0), 150: (20, 0, 0), 100: (20, 0, 0), 50: (13, 0, 7), 25: (1, 1, 18),
+           10: (0, 18, 2), 5: (0, 19, 1), 2: (0, 18, 2)},
+    1.7: {200: (0, 1, 0), 150: (0, 20, 0), 100: (0, 20, 0), 50: (0, 20, 0), 25: (0, 20, 0),
+          10: (0, 20, 0), 5: (0, 20, 0), 2: (0, 20, 0)},
+}
+
+
+@dataclass(frozen=True)
+class Table1Config:
+    """Parameters of the Table 1 study (defaults: the paper's §3.4.1)."""
+
+    N: int = 1000
+    d: int = 200
+    betas: tuple = (1.5, 1.62, 1.7)
+    ks: tuple = (150, 100, 50, 25, 10, 5, 2)
+    n_projections: int = 20
+    steps: int = 1500
+    dt: float = 0.02
+    G: float = 0.8
+    normalize: str = "sum"
+    kind: str = "gaussian"
+    seed: int = 20120101
+    data_seed: int = 0
+    record_every: int = 10
+    yes_below: float = 1e-10
+    no_above: float = 1e-3
+    figure_ks: dict = field(default_factory=lambda: {1.5: (100, 10), 1.62: (100, 25), 1.7: (100, 10)})
+
+    def __post_init__(self):
+        as_int(self.N, "N", low=1)
+        as_int(self.d, "d", low=1)
+        as_int(self.n_projections, "n_projections", low=1)
+        as_int(self.steps, "steps", low=1)
+        as_int(self.record_every, "record_every", low=1)
+        as_float(self.dt, "dt", low=0.0, low_open=True)
+        as_float(self.G, "G", low=0.0, low_open=True)
+        as_choice(self.normalize, "normalize", ("sum", "mean"))
+        if not self.betas:
+            raise InvalidInput("betas must not be empty")
+        for b in self.betas:
+            as_float(b, "beta", low=0.0)
+        for k in self.ks:
+            as_int(k, "k", low=1)
+        if self.steps % self.record_every:
+            raise InvalidInput(
+                f"steps must be a multiple of record_every={self.record_every}, got {self.steps}"
+            )
+
+    @classmethod
+    def quick(cls, **overrides) -> "Table1Config":
+        """A reduced version (N = 200, 5 projections per k) that runs in about a minute.
+
+        G is scaled to keep N·G (the mean-field coupling strength) of the full setting.
+        """
+        base = dict(N=200, n_projections=5, ks=(100, 25, 10, 2), G=0.8 * 1000 / 200,
+                    record_every=50,
+                    figure_ks={1.5: (100, 10), 1.62: (100, 25), 1.7: (100, 10)})
+        base.update(overrides)
+        return cls(**base)
+
+    def to_json(self) -> dict:
+        out = dataclasses.asdict(self)
+        out["betas"] = list(self.betas)
+        out["ks"] = list(self.ks)
+        out["figure_ks"] = {str(b): list(v) for b, v in self.figure_ks.items()}
+        return out
+
+
+def initial_data(N: int, d: int, data_seed: int):
+    """§3.4.1: x⁰ ~ U[0,1]ᵈ, v⁰ ~ U[−1,1]ᵈ componentwise (the same draw for every member)."""
+    rng = np.random.default_rng(data_seed)
+    return rng.uniform(0.0, 1.0, (N, d)), rng.uniform(-1.0, 1.0, (N, d))
+
+
+def member(params: dict, seed) -> dict:
+    """One simulation of the study: the original system (``k = 0``) or a projected one.
+
+    Top-level (picklable) member function for :func:`kinred.ensemble.run_ensemble`.
+    """
+    from ..dynamics import Alignment, CuckerSmale, Scene
+    from ..integrate import SaveAt, simulate
+    from ..projection import jl_matrix
+
+    x0, v0 = initial_data(params["N"], params["d"], params["data_seed"])
+    scene = Scene([Alignment(kernel=CuckerSmale(G=params["G"], beta=params["beta"]))],
+                  normalize=params["normalize"])
+    if params["k"]:
+        M = jl_matrix(params["k"], params["d"], kind=params["kind"], seed=seed)
+        scene = scene.project(M)
+        x0, v0 = M.apply(x0), M.apply(v0)
+    t_end = params["steps"] * params["dt"]
+    traj = simulate(scene, x0, v0, t_span=(0.0, t_end), dt=params["dt"], method="euler",
+                    save=SaveAt(every=params["record_every"], observables=("gamma",)))
+    return {"t": traj.t, "gamma": traj.observables["gamma"]}
+
+
+def _verdict(g: float, yes_below: float, no_above: float) -> str:
+    from ..observables import flocking_verdict
+
+    return flocking_verdict(g, yes_below=yes_below, no_above=no_above)
+
+
+@dataclass(frozen=True)
+class Table1Result:
+    """Counts per (β, dimension), the Γ curves, and how they were obtained."""
+
+    config: Table1Config
+    counts: dict          # {beta: {dim: (pos, neg, n/a)}}
+    t: np.ndarray         # (T,)
+    gamma: dict           # {beta: {dim: (n_runs, T) array}}
+    wall_time: float
+    executor: str
+    workers: int | None
+
+    def to_json(self) -> dict:
+        return {
+            "config": self.config.to_json(),
+            "coupling": f"normalize={self.config.normalize!r}, G={self.config.G}",
+            "counts": {str(b): {str(k): dict(zip(("pos", "neg", "n/a"), c)) for k, c in v.items()}
+                       for b, v in self.counts.items()},
+            "gamma_initial": {str(b): {str(k): g[:, 0].tolist() for k, g in v.items()}
+                              for b, v in self.gamma.items()},
+            "gamma_final": {str(b): {str(k): g[:, -1].tolist() for k, g in v.items()}
+                            for b, v in self.gamma.items()},
+            "wall_time_s": self.wall_time,
+            "executor": self.executor,
+            "workers": self.workers,
+            "paper": {str(b): {str(k): dict(zip(("pos", "neg", "n/a"), c)) for k, c in v.items()}
+                      for b, v in PAPER_TABLE1.items()},
+        }
+
+
+def _members(cfg: Table1Config) -> list[dict]:
+    common = dict(N=cfg.N, d=cfg.d, steps=cfg.steps, dt=cfg.dt, G=cfg.G, normalize=cfg.normalize,
+                  kind=cfg.kind, data_seed=cfg.data_seed, record_every=cfg.record_every)
+    out = []
+    for beta in cfg.betas:
+        out.append(dict(common, beta=float(beta), k=0, realization=0))
+        for k in cfg.ks:
+            for r in range(cfg.n_projections):
+                out.append(dict(common, beta=float(beta), k=int(k), realization=r))
+    return out
+
+
+def run(cfg: Table1Config | None = None, *, out_dir=None, executor: str = "processes",
+        workers: int | None = None, scheduler=None, resume: bool = False,
+        progress: bool = True) -> Table1Result:
+    """Run the study; with ``out_dir`` write the store, ``table1.json``, figures and report.
+
+    Members are written to ``out_dir/store`` as they finish (resumable with ``resume=True``).
+    """
+    from ..ensemble import run_ensemble
+
+    cfg = cfg or Table1Config()
+    members = _members(cfg)
+    store = None if out_dir is None else Path(out_dir) / "store"
+    t0 = time.perf_counter()
+    ens = run_ensemble(member, members, master_seed=cfg.seed, executor=executor, workers=workers,
+                       scheduler=scheduler, store=store, resume=resume,
+                       config=cfg.to_json(), progress=progress)
+    wall = time.perf_counter() - t0
+    counts: dict = {}
+    gamma: dict = {}
+    t = np.asarray(ens.results[0]["t"])
+    for beta in cfg.betas:
+        b = float(beta)
+        counts[b], gamma[b] = {}, {}
+        for dim, k in [(cfg.d, 0)] + [(int(k), int(k)) for k in cfg.ks]:
+            idx = [i for i, m in enumerate(ens.members) if m["beta"] == b and m["k"] == k]
+            g = np.stack([np.asarray(ens.results[i]["gamma"]) for i in idx])
+            verdicts = [_verdict(float(gi[-1]), cfg.yes_below, cfg.no_above) for gi in g]
+            counts[b][dim] = tuple(verdicts.count(v) for v in ("pos", "neg", "n/a"))
+            gamma[b][dim] = g
+    result = Table1Result(cfg, counts, t, gamma, wall, ens.executor, workers)
+    if out_dir is not None:
+        write_outputs(result, out_dir)
+    return result
+
+
+def format_table(counts: dict, *, title: str = "") -> str:
+    """The paper's layout: one block per β with columns dim | pos | neg | n/a, side by side."""
+    betas = list(counts)
+    blocks = []
+    for b in betas:
+        lines = [f"beta = {b:g}".ljust(24), "dim | pos | neg | n/a".ljust(24), "-" * 22 + "  "]
+        for dim, (p, n, u) in counts[b].items():
+            lines.append(f"{dim:>3} | {p:>3} | {n:>3} | {u:>3}".ljust(24))
+        blocks.append(lines)
+    height = max(len(b) for b in blocks)
+    rows = ["".join(b[i] if i < len(b) else " " * 24 for b in blocks).rstrip() for i in range(height)]
+    return ((title + "\n") if title else "") + "\n".join(rows)
+
+
+def _figures(result: Table1Result) -> list[tuple[str, bytes]]:
+    from ..report import figure_png
+    from ..report._figures import pyplot
+
+    plt = pyplot()
+    cfg = result.config
+    figs = []
+    for n_fig, beta in enumerate(cfg.betas, start=1):
+        b = float(beta)
+        ks = cfg.figure_ks.get(beta, cfg.figure_ks.get(b, tuple(cfg.ks[:2])))
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+        orig = result.gamma[b][cfg.d][0]
+        for ax, k in zip(axes[0], ks):
+            if k not in result.gamma[b]:
+                ax.set_visible(False)
+                continue
+            for g in result.gamma[b][k]:
+                ax.semilogy(result.t, np.maximum(g, 1e-300), lw=0.8, alpha=0.7)
+            ax.semilogy(result.t, np.maximum(orig, 1e-300), "k--", lw=2.5, label=f"original d={cfg.d}")
+            ax.set_title(f"beta={b:g}: Gamma(t), {len(result.gamma[b][k])} projections to k={k}")
+            ax.set_xlabel("t")
+            ax.legend(loc="best")
+        dims = list(result.gamma[b])
+        for ax, col, name in ((axes[1][0], 0, "initial Gamma(0)"), (axes[1][1], -1, f"final Gamma({result.t[-1]:g})")):
+            for pos, dim in enumerate(dims):
+                vals = result.gamma[b][dim][:, col]
+                ax.semilogy(np.full(vals.shape, pos), np.maximum(vals, 1e-300), "o", ms=4)
+            if col == -1:
+                ax.axhline(cfg.yes_below, ls="--", c="gray")
+                ax.axhline(cfg.no_above, ls="--", c="gray")
+            ax.set_xticks(range(len(dims)), [str(d) for d in dims])
+            ax.set_xlabel("dimension")
+            ax.set_title(f"beta={b:g}: {name} per dimension")
+        fig.suptitle(f"Figure {n_fig} (paper §3.4.1), coupling normalize={cfg.normalize!r}, G={cfg.G:g}")
+        figs.append((f"figure{n_fig}_beta{b:g}.png", figure_png(fig)))
+    return figs
+
+
+def write_outputs(result: Table1Result, out_dir) -> Path:
+    """Write ``table1.json``, ``table1.txt``, the figures and ``report.html`` to ``out_dir``."""
+    from ..io import ResultFolder
+    from ..report import Report, Table
+
+    folder = ResultFolder(out_dir)
+    cfg = result.config
+    folder.write_npz("gamma.npz", {f"beta{b:g}_dim{k}": g for b, v in result.gamma.items()
+                                   for k, g in v.items()} | {"t": result.t})
+    text = format_table(result.counts, title=f"Table 1 (kinred, coupling normalize={cfg.normalize!r}, G={cfg.G:g})")
+    paper = format_table({b: v for b, v in PAPER_TABLE1.items() if b in result.counts},
+                         title="Table 1 (paper)")
+    folder.write_text("table1.txt", text + "\n\n" + paper + "\n")
+    figs = _figures(result)
+    rep = Report("kinred: the paper's Table 1 (§3.4.1)",
+                 subtitle=f"N={cfg.N}, d={cfg.d}, {cfg.n_projections} {cfg.kind} projections per k, "
+                          f"{cfg.steps} Euler steps of {cfg.dt}, coupling normalize={cfg.normalize!r}, "
+                          f"G={cfg.G:g}; wall time {result.wall_time:.1f} s ({result.executor}).")
+    sec = rep.section("Flocking verdicts", [
+        "pos: Gamma(T) < %g, neg: Gamma(T) > %g, n/a otherwise (the paper's rule)." % (cfg.yes_below, cfg.no_above)])
+    for b, v in result.counts.items():
+        paper_b = PAPER_TABLE1.get(b, {})
+        sec.tables.append(Table(["dim", "pos", "neg", "n/a", "paper pos", "paper neg", "paper n/a"],
+                                [[k, *c, *paper_b.get(k, ("", "", ""))] for k, c in v.items()],
+                                caption=f"beta = {b:g}"))
+    figsec = rep.section("Figures 1-3")
+    for name, png in figs:
+        folder.write_bytes(name, png)
+        figsec.add_figure(name, png)
+    folder.write_text("report.html", rep.to_html())
+    folder.write_json("table1.json", result.to_json())
+    return folder.mark_complete({"study": "table1", "wall_time_s": result.wall_time,
+                                 "counts": result.to_json()["counts"]})
