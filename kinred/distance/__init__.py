@@ -1,0 +1,24 @@
+"""Wasserstein-1 distances (eq. (4.5) of the paper, label ``wasserstein``).
+
+:func:`w1` returns a :class:`W1Result` saying what it computed: exact values (POT's network
+simplex with a dense or lazily evaluated Euclidean cost, exact 1-D formulas, the exact ℓ1 W1
+of product measures) or, beyond exact sizes, a certified bracket ``[lower, upper]``.
+:func:`sliced_w1` is a different distance and is kept under its own name.
+
+This is the only package of kinred that imports POT (``ot``), lazily.
+"""
+
+from ._pot import default_num_iter_max
+from ._result import SlicedW1Result, W1Result
+from ._w1 import DEFAULT_MAX_DENSE_BYTES, DEFAULT_MAX_EXACT_PAIRS, METHODS, sliced_w1, w1
+
+__all__ = [
+    "w1",
+    "sliced_w1",
+    "W1Result",
+    "SlicedW1Result",
+    "METHODS",
+    "DEFAULT_MAX_DENSE_BYTES",
+    "DEFAULT_MAX_EXACT_PAIRS",
+    "default_num_iter_max",
+]
