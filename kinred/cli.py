@@ -24,7 +24,9 @@ __all__ = ["main", "build_parser"]
 
 #: Modules of :mod:`kinred.commands`, in the order ``kinred --help`` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
+    "kinred.commands.demo",
     "kinred.commands.quantize",
+    "kinred.commands.paper",
 )
 
 

@@ -1,0 +1,105 @@
+"""Benchmark: kinred's dynamics engine against the NumPy Cucker–Smale baseline.
+
+Times, in one process, forward-Euler Cucker–Smale runs (β = 1.5 and 1.62, ``normalize="sum"``,
+G = 0.8, h = 0.02) at (N, d) = (1000, 200) full and (1000, 10) projected against
+``../shared/reference/cucker_smale_numpy.py`` (imported from its path, never copied), prints
+both times, their ratio and the largest relative Γ(t) difference while Γ > 1e-8 (before
+flocking), then a self-propulsion-only scene against an alignment scene at the same N, d, and
+single-threaded per-step times at k = 2, 10, 50, 150, 200.
+
+Run from the repository root::
+
+    python benchmarks/bench_dynamics.py            # 1500 steps
+    python benchmarks/bench_dynamics.py --quick    # 150 steps
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from kinred.dynamics import (Alignment, CuckerSmale, Scene, SelfPropulsion,  # noqa: E402
+                             get_num_threads, set_num_threads)
+from kinred.integrate import SaveAt, simulate  # noqa: E402
+
+
+def load_baseline():
+    path = os.path.join(ROOT, "..", "shared", "reference", "cucker_smale_numpy.py")
+    spec = importlib.util.spec_from_file_location("cs_baseline", os.path.normpath(path))
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def run_pair(base, x0, v0, beta, steps, G, label):
+    t = time.perf_counter()
+    tb, gb = base.simulate(x0, v0, beta=beta, G=G, normalize="sum", h=0.02, steps=steps,
+                           record_every=50)
+    t_base = time.perf_counter() - t
+    scene = Scene([Alignment(CuckerSmale(G=G, beta=beta))], normalize="sum")
+    tr = simulate(scene, x0, v0, (0.0, steps * 0.02), 0.02, save=SaveAt(every=50,
+                  observables=("gamma",)))
+    t_ours = tr.wall_time
+    g = tr.observables["gamma"]
+    mask = gb > 1e-8
+    rel = float(np.max(np.abs(g[mask] - gb[mask]) / gb[mask])) if mask.any() else float("nan")
+    print(f"{label:34s} beta={beta:<5} baseline {t_base:7.2f} s  kinred {t_ours:7.2f} s  "
+          f"ratio {t_base / t_ours:5.2f}x  max rel dGamma (Gamma>1e-8) {rel:.2e}  "
+          f"Gamma(T) {g[-1]:.2e} vs {gb[-1]:.2e}")
+
+
+def per_step(N, k, steps, beta=1.62):
+    rng = np.random.default_rng(3)
+    x0, v0 = rng.uniform(0, 1, (N, k)), rng.uniform(-1, 1, (N, k))
+    scene = Scene([Alignment(CuckerSmale(G=0.8, beta=beta))], normalize="sum")
+    tr = simulate(scene, x0, v0, (0.0, steps * 0.02), 0.02, save=SaveAt(every=50,
+                  observables=("gamma",)))
+    return tr.wall_time / steps * 1e3
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="150 steps instead of 1500")
+    ap.add_argument("--steps", type=int, default=None)
+    args = ap.parse_args(argv)
+    steps = args.steps or (150 if args.quick else 1500)
+    base = load_baseline()
+    N, d, k = 1000, 200, 10
+    x0, v0 = base.paper_initial_data(N, d, seed=0)
+    M = np.random.default_rng(1).normal(0.0, 1.0 / np.sqrt(k), (k, d))
+    print(f"steps={steps}, engine threads={get_num_threads()}, cpu_count={os.cpu_count()}")
+    for beta in (1.5, 1.62):
+        run_pair(base, x0, v0, beta, steps, 0.8, f"full (N, d) = ({N}, {d})")
+        run_pair(base, x0 @ M.T, v0 @ M.T, beta, steps, 0.8, f"projected (N, k) = ({N}, {k})")
+
+    # self-propulsion only vs alignment at the same N, d
+    ns = min(steps, 150)
+    for name, effects in (("self-propulsion only", [SelfPropulsion(1.0, 0.5)]),
+                          ("alignment + self-propulsion", [Alignment(CuckerSmale(0.8, 1.62)),
+                                                           SelfPropulsion(1.0, 0.5)])):
+        tr = simulate(Scene(effects, normalize="sum"), x0, 0.1 * v0, (0.0, ns * 0.02), 0.02,
+                      save=SaveAt(every=50, observables=("gamma",)))
+        print(f"{name:30s} (N, d) = ({N}, {d}): {tr.wall_time / ns * 1e3:8.3f} ms/step")
+
+    old = get_num_threads()
+    set_num_threads(1)
+    try:
+        ns = min(steps, 100)
+        for kk in (2, 10, 50, 150, 200):
+            print(f"single-threaded per-step time, N=1000, k={kk:3d}: "
+                  f"beta=1.5 {per_step(N, kk, ns, 1.5):6.2f} ms, "
+                  f"beta=1.62 {per_step(N, kk, ns, 1.62):6.2f} ms")
+    finally:
+        set_num_threads(old)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,256 @@
+r"""Interaction kernels: functions of the pairwise distance ``s = ‖xᵢ − xⱼ‖``.
+
+A kernel is any object with ``__call__(s) -> φ(s)`` (vectorized over an ndarray of
+distances). Built-in kernels also provide
+
+* ``value_sq(q, out)`` – the fast path: ``φ(√q)`` from squared distances ``q`` into ``out``
+  (``out`` may be ``q``), with numpy ufuncs on preallocated blocks;
+* ``sup_norm()`` and ``lipschitz()`` – ``‖φ‖∞`` and ``‖φ′‖∞`` on ``[0, ∞)``, the constants that
+  enter the bounds (1.2)–(1.4) of the paper (labels ``eq:condf1``–``eq:condf3``).
+
+Custom kernels without ``value_sq`` still work: the engine evaluates ``kernel(np.sqrt(q))``.
+
+Sign conventions (eq. (3.14), label ``DOrsogna2``, and eq. (4.3), label ``eq:dyn5``): a
+potential ``U`` acts on agent ``i`` by ``−∇_{xᵢ} U(‖xᵢ − xⱼ‖) = u(s)(xⱼ − xᵢ)`` with
+``u(s) = U′(s)/s``, so the engine only ever needs the scalar ``u``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .._validate import as_float
+from . import _kernels
+
+__all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
+
+
+@runtime_checkable
+class Kernel(Protocol):
+    """Protocol of a pairwise kernel ``φ: [0, ∞) → ℝ``.
+
+    Only ``__call__`` is required; ``value_sq``, ``sup_norm`` and ``lipschitz`` are optional
+    (the engine falls back to ``φ(√q)``).
+    """
+
+    def __call__(self, s): ...
+
+
+class CuckerSmale:
+    r"""Cucker–Smale communication rate (eq. (2.13), label ``CS2``).
+
+    .. math:: g(s) = \frac{G}{(1 + s^2)^{\beta}} = G\,\exp\bigl(-\beta\,\operatorname{log1p}(s^2)\bigr)
+
+    evaluated in the exp–log1p form, which never overflows (large ``s``, ``β`` up to any
+    size underflow gracefully to 0). When ``2β`` is an integer ≤ 32 the fast path uses
+    square roots and divisions only (a numba kernel), otherwise numpy ufuncs.
+
+    Parameters
+    ----------
+    G : float
+        Coupling strength ``g(0) = G >= 0``. The paper does not state ``G``; with
+        ``normalize="sum"`` and ``G = 0.8`` the engine reproduces the paper's Table 1
+        pattern (see docs/dynamics.md).
+    beta : float
+        Decay exponent ``β >= 0``.
+
+    Examples
+    --------
+    >>> g = CuckerSmale(G=2.0, beta=1.5)
+    >>> float(g(np.array([0.0, 1.0]))[1])   # 2 / 2**1.5
+    0.7071067811865476
+    >>> g.sup_norm(), round(g.lipschitz(), 6)
+    (2.0, 1.7173)
+    """
+
+    def __init__(self, G: float = 1.0, beta: float = 1.5):
+        self.G = as_float(G, "G", low=0.0)
+        self.beta = as_float(beta, "beta", low=0.0)
+        n2 = 2.0 * self.beta
+        self._n2 = int(n2) if (n2 == int(n2) and n2 <= 32) else None
+
+    def __call__(self, s):
+        s = np.asarray(s, dtype=float)
+        return self.G * np.exp(-self.beta * np.log1p(s * s))
+
+    def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``g(√q)`` for squared distances ``q (b, m)`` into ``out (b, m)``."""
+        if self._n2 is not None:
+            return _kernels.cs_halfint(q, self.G, self._n2, out)
+        np.log1p(q, out=out)
+        np.multiply(out, -self.beta, out=out)
+        np.exp(out, out=out)
+        if self.G != 1.0:
+            np.multiply(out, self.G, out=out)
+        return out
+
+    def sup_norm(self) -> float:
+        """``‖g‖∞ = g(0) = G``."""
+        return self.G
+
+    def lipschitz(self) -> float:
+        r"""``‖g′‖∞``, attained at ``s* = 1/√(2β+1)``:
+
+        .. math:: \|g'\|_\infty = \frac{2 G \beta s^*}{(1 + s^{*2})^{\beta + 1}}.
+        """
+        b = self.beta
+        if b == 0.0 or self.G == 0.0:
+            return 0.0
+        s = 1.0 / math.sqrt(2.0 * b + 1.0)
+        return 2.0 * self.G * b * s * math.exp(-(b + 1.0) * math.log1p(s * s))
+
+    def __repr__(self) -> str:
+        return f"CuckerSmale(G={self.G!r}, beta={self.beta!r})"
+
+
+class Morse:
+    r"""Morse potential of the self-propulsion model (§3.3.2 of the paper, eq. (3.14)).
+
+    .. math::
+        U(s) = -C_a e^{-s/\ell_a} + C_r e^{-s/\ell_r}, \qquad
+        U'(s) = \frac{C_a}{\ell_a} e^{-s/\ell_a} - \frac{C_r}{\ell_r} e^{-s/\ell_r},
+
+    and the engine uses ``u(s) = U′(r)/r`` with ``r = √(s² + soft²)``.
+
+    Coincident agents. Standard Morse has ``U′(0) = C_a/ℓ_a − C_r/ℓ_r ≠ 0`` so
+    ``u(s) = U′(s)/s`` blows up like ``1/s``. Two documented choices:
+
+    * ``soft = 0`` (default, the exact potential): the pair force ``u(s)(xⱼ − xᵢ)`` has norm
+      ``|U′(s)| ≤ max(C_a/ℓ_a, C_r/ℓ_r)`` (:meth:`force_sup`), bounded for every ``s > 0``;
+      at ``s = 0`` (coincident agents) the direction is undefined and the force is set to
+      exactly 0 (``u(0) := 0``, the symmetric subgradient choice). ``u`` itself is unbounded,
+      so :meth:`sup_norm` and :meth:`lipschitz` return ``inf`` (the paper's assumption that
+      ``u`` is bounded and Lipschitz fails).
+    * ``soft = ε > 0``: the softened potential ``U_ε(s) = U(√(s² + ε²))`` with
+      ``u_ε(s) = U′(r)/r`` finite at 0, bounded and Lipschitz, as the paper assumes.
+
+    Parameters
+    ----------
+    Ca, la : float
+        Attraction strength (>= 0) and length (> 0).
+    Cr, lr : float
+        Repulsion strength (>= 0) and length (> 0).
+    soft : float
+        Softening length ``ε >= 0``.
+
+    Examples
+    --------
+    >>> m = Morse(Ca=1.0, la=2.0, Cr=1.5, lr=0.5, soft=0.1)
+    >>> bool(np.isfinite(m(np.array([0.0]))[0]))
+    True
+    >>> float(Morse(1.0, 2.0, 1.5, 0.5)(np.array([0.0]))[0])   # coincident agents: zero force
+    0.0
+    """
+
+    def __init__(self, Ca: float = 1.0, la: float = 2.0, Cr: float = 1.5, lr: float = 0.5,
+                 soft: float = 0.0):
+        self.Ca = as_float(Ca, "Ca", low=0.0)
+        self.la = as_float(la, "la", low=0.0, low_open=True)
+        self.Cr = as_float(Cr, "Cr", low=0.0)
+        self.lr = as_float(lr, "lr", low=0.0, low_open=True)
+        self.soft = as_float(soft, "soft", low=0.0)
+
+    def U(self, s):
+        """The potential ``U(s)`` (unsoftened)."""
+        s = np.asarray(s, dtype=float)
+        return -self.Ca * np.exp(-s / self.la) + self.Cr * np.exp(-s / self.lr)
+
+    def dU(self, s):
+        """``U′(s)``."""
+        s = np.asarray(s, dtype=float)
+        return self.Ca / self.la * np.exp(-s / self.la) - self.Cr / self.lr * np.exp(-s / self.lr)
+
+    def __call__(self, s):
+        """``u(s) = U′(r)/r``, ``r = √(s² + soft²)``; ``u(0) = 0`` when ``soft = 0``."""
+        s = np.asarray(s, dtype=float)
+        return self.value_sq(s * s, np.empty_like(s))
+
+    def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``u(√q)`` for squared distances ``q`` into ``out`` (may alias ``q``)."""
+        if self.soft:
+            r = np.sqrt(q + self.soft * self.soft)
+        else:
+            r = np.sqrt(q)
+        du = self.dU(r)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            np.divide(du, r, out=out)
+        if not self.soft:
+            out[r == 0.0] = 0.0
+        return out
+
+    def force_sup(self) -> float:
+        """``sup_{s>0} |U′(s)| <= max(Ca/la, Cr/lr)`` (a difference of two positive decreasing terms)."""
+        return max(self.Ca / self.la, self.Cr / self.lr)
+
+    def _grid_max(self, f) -> float:
+        from scipy.optimize import minimize_scalar
+
+        L = max(self.la, self.lr)
+        head = [0.0] if self.soft else []
+        s = np.concatenate([head, np.geomspace(1e-6 * L, 60.0 * L, 4000)])
+        vals = np.abs(f(s))
+        i = int(np.argmax(vals))
+        lo, hi = s[max(i - 1, 0)], s[min(i + 1, len(s) - 1)]
+        if hi > lo:
+            res = minimize_scalar(lambda t: -abs(float(f(np.array([t]))[0])), bounds=(lo, hi),
+                                  method="bounded", options={"xatol": 1e-12 * L})
+            return float(max(vals[i], -res.fun))
+        return float(vals[i])
+
+    def _du_ds(self, s):
+        # derivative of u(s) = U'(r)/r with r = sqrt(s^2 + eps^2): u'(s) = (U''(r)/r - U'(r)/r^2) s/r
+        r = np.sqrt(s * s + self.soft ** 2)
+        d2 = (-self.Ca / self.la ** 2 * np.exp(-r / self.la)
+              + self.Cr / self.lr ** 2 * np.exp(-r / self.lr))
+        return (d2 / r - self.dU(r) / r ** 2) * s / r
+
+    def sup_norm(self) -> float:
+        """``‖u‖∞`` (``inf`` when ``soft = 0`` and ``U′(0) ≠ 0``), by a bracketed 1-D maximization."""
+        if not self.soft and self.Ca / self.la != self.Cr / self.lr:
+            return math.inf
+        return self._grid_max(self)
+
+    def lipschitz(self) -> float:
+        """``‖u′‖∞`` (``inf`` when ``soft = 0`` and ``U′(0) ≠ 0``), by a bracketed 1-D maximization."""
+        if not self.soft and self.Ca / self.la != self.Cr / self.lr:
+            return math.inf
+        return self._grid_max(self._du_ds)
+
+    def __repr__(self) -> str:
+        return (f"Morse(Ca={self.Ca!r}, la={self.la!r}, Cr={self.Cr!r}, lr={self.lr!r}, "
+                f"soft={self.soft!r})")
+
+
+class Quadratic:
+    r"""Quadratic potential ``U(s) = c s²/2``, so ``u(s) = c`` (linear attraction).
+
+    With :class:`~kinred.dynamics.Aggregation` it gives ``ẋᵢ = c Σⱼ wⱼ (xⱼ − xᵢ)``, whose
+    solution is known in closed form (used by the tests).
+
+    Examples
+    --------
+    >>> Quadratic(2.0)(np.array([0.0, 3.0]))
+    array([2., 2.])
+    """
+
+    def __init__(self, c: float = 1.0):
+        self.c = as_float(c, "c")
+
+    def __call__(self, s):
+        return np.full(np.shape(s), self.c)
+
+    def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
+        out[...] = self.c
+        return out
+
+    def sup_norm(self) -> float:
+        return abs(self.c)
+
+    def lipschitz(self) -> float:
+        return 0.0
+
+    def __repr__(self) -> str:
+        return f"Quadratic(c={self.c!r})"

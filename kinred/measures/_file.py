@@ -1,0 +1,214 @@
+"""Measure files (TOML) for ``kinred quantize`` and the experiments.
+
+Format (see ``docs/measures-file.md``)::
+
+    name = "optional label"           # optional
+    description = "optional text"     # optional
+
+    [[coordinate]]                    # one table per coordinate, in order
+    dist = "beta"                     # any scipy.stats continuous distribution, or "dirac"
+    params = {a = 2.0, b = 3.0}       # keyword parameters of that distribution (shapes, loc, scale)
+    support = [0.0, 1.0]              # truncation [a, b]; required for unbounded laws
+    repeat = 50                       # optional: this coordinate 50 times (default 1)
+    decay = 0.8                       # optional: copy i (0-based) is the law of decay**i * X
+
+    [[coordinate]]
+    dist = "dirac"
+    at = 0.5                          # location of the point mass
+
+A mixture replaces the top-level ``[[coordinate]]`` tables by components::
+
+    [[component]]
+    weight = 0.5
+    [[component.coordinate]]
+    dist = "uniform"
+    params = {loc = 0.0, scale = 1.0}
+
+    [[component]]
+    weight = 0.5
+    [[component.coordinate]]
+    dist = "uniform"
+    params = {loc = 2.0, scale = 1.0}
+
+Coordinates make a :class:`~kinred.measures.TensorProduct`; components a
+:class:`~kinred.measures.Mixture` (weights must sum to one). Unknown keys, unknown
+distributions, invalid parameters, NaN, empty or reversed supports and bad weights raise
+:class:`kinred.errors.ConfigError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+import tomllib
+
+import numpy as np
+from scipy import stats
+
+from ..errors import ConfigError, InvalidInput
+from ._base import Dirac, Measure
+from ._composite import Mixture, TensorProduct
+from ._univariate import Univariate
+
+__all__ = ["load_measure", "measure_from_dict"]
+
+_TOP_KEYS = {"name", "description", "coordinate", "component"}
+_COORD_KEYS = {"dist", "params", "support", "repeat", "decay", "at"}
+_COMP_KEYS = {"weight", "coordinate"}
+
+
+def _err(source: str, key: str, msg: str) -> ConfigError:
+    return ConfigError(f"{source}: {key}: {msg}")
+
+
+def _number(value, source, key) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise _err(source, key, f"must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise _err(source, key, f"must be finite, got {v}")
+    return v
+
+
+def _check_keys(table, allowed, source, where):
+    if not isinstance(table, dict):
+        raise _err(source, where, f"must be a table, got {table!r}")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise _err(
+            source, f"{where}.{unknown[0]}" if where else unknown[0],
+            f"unknown key; valid keys are {', '.join(sorted(allowed))}",
+        )
+
+
+def _coordinates(tables, source, where) -> list[Measure]:
+    if not isinstance(tables, list) or not tables:
+        raise _err(source, where, "must be a non-empty array of tables ([[coordinate]])")
+    out: list[Measure] = []
+    for i, t in enumerate(tables):
+        key = f"{where}[{i}]"
+        _check_keys(t, _COORD_KEYS, source, key)
+        repeat = t.get("repeat", 1)
+        if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
+            raise _err(source, f"{key}.repeat", f"must be an integer >= 1, got {repeat!r}")
+        decay = _number(t.get("decay", 1.0), source, f"{key}.decay")
+        if decay <= 0:
+            raise _err(source, f"{key}.decay", f"must be > 0, got {decay}")
+        if "dist" not in t:
+            raise _err(source, f"{key}.dist", "missing (a scipy.stats distribution name or 'dirac')")
+        name = t["dist"]
+        if not isinstance(name, str):
+            raise _err(source, f"{key}.dist", f"must be a string, got {name!r}")
+        if name == "dirac":
+            for bad in ("params", "support"):
+                if bad in t:
+                    raise _err(source, f"{key}.{bad}", "not used by dist = 'dirac' (give 'at')")
+            if "at" not in t:
+                raise _err(source, f"{key}.at", "missing: location of the point mass")
+            at = _number(t["at"], source, f"{key}.at")
+            out.extend(Dirac(at * decay**r) for r in range(repeat))
+            continue
+        if "at" in t:
+            raise _err(source, f"{key}.at", "only used with dist = 'dirac'")
+        gen = getattr(stats, name, None)
+        if not isinstance(gen, stats.rv_continuous):
+            raise _err(
+                source, f"{key}.dist",
+                f"unknown distribution {name!r}: use a scipy.stats continuous distribution "
+                "name (e.g. 'uniform', 'beta', 'norm', 'truncnorm') or 'dirac'",
+            )
+        params = t.get("params", {})
+        if not isinstance(params, dict):
+            raise _err(source, f"{key}.params", f"must be a table, got {params!r}")
+        pvals = {k: _number(v, source, f"{key}.params.{k}") for k, v in params.items()}
+        try:
+            shapes, loc, scale = gen._parse_args(**pvals)
+        except TypeError as exc:
+            raise _err(source, f"{key}.params", f"invalid parameters for {name}: {exc}") from None
+        if not (scale > 0) or not bool(np.all(gen._argcheck(*shapes))):
+            raise _err(source, f"{key}.params", f"invalid parameter values for {name}: {pvals}")
+        support = None
+        if "support" in t:
+            s = t["support"]
+            if not (isinstance(s, list) and len(s) == 2):
+                raise _err(source, f"{key}.support", f"must be [a, b], got {s!r}")
+            a = _number(s[0], source, f"{key}.support[0]")
+            b = _number(s[1], source, f"{key}.support[1]")
+            if not a < b:
+                raise _err(source, f"{key}.support", f"needs a < b (a positive width), got [{a}, {b}]")
+            support = (a, b)
+        for r in range(repeat):
+            f = decay**r
+            try:
+                dist = gen(*shapes, loc=loc * f, scale=scale * f)
+                sup = None if support is None else (support[0] * f, support[1] * f)
+                out.append(Univariate(dist, support=sup))
+            except InvalidInput as exc:
+                raise _err(source, key, str(exc)) from None
+    return out
+
+
+def measure_from_dict(data: dict, source: str = "<measure>") -> Measure:
+    """Build a measure from the parsed TOML table ``data`` (format in the module docstring).
+
+    Parameters
+    ----------
+    data : dict
+        The parsed file.
+    source : str
+        Name used in error messages (the file path).
+
+    Examples
+    --------
+    >>> mu = measure_from_dict({"coordinate": [
+    ...     {"dist": "uniform", "params": {"loc": 0.0, "scale": 2.0}, "repeat": 3, "decay": 0.5}]})
+    >>> mu.support_widths()
+    array([2. , 1. , 0.5])
+    """
+    _check_keys(data, _TOP_KEYS, source, "")
+    if ("coordinate" in data) == ("component" in data):
+        raise _err(source, "coordinate/component",
+                   "give exactly one of [[coordinate]] (a tensor product) or [[component]] (a mixture)")
+    if "coordinate" in data:
+        return TensorProduct(_coordinates(data["coordinate"], source, "coordinate"))
+    comps = data["component"]
+    if not isinstance(comps, list) or not comps:
+        raise _err(source, "component", "must be a non-empty array of tables ([[component]])")
+    measures, weights = [], []
+    for l, c in enumerate(comps):
+        key = f"component[{l}]"
+        _check_keys(c, _COMP_KEYS, source, key)
+        if "weight" not in c:
+            raise _err(source, f"{key}.weight", "missing")
+        w = _number(c["weight"], source, f"{key}.weight")
+        if w < 0:
+            raise _err(source, f"{key}.weight", f"must be >= 0, got {w}")
+        weights.append(w)
+        measures.append(TensorProduct(_coordinates(c.get("coordinate"), source, f"{key}.coordinate")))
+    dims = {m.dim for m in measures}
+    if len(dims) > 1:
+        raise _err(source, "component", f"all components need the same number of coordinates, got {[m.dim for m in measures]}")
+    s = sum(weights)
+    if abs(s - 1.0) > 1e-9:
+        raise _err(source, "component.weight", f"weights must sum to one, got sum {s!r}")
+    return Mixture(measures, weights)
+
+
+def load_measure(path: str | os.PathLike) -> Measure:
+    """Read a measure file (TOML; format in :mod:`kinred.measures._file` and ``docs/measures-file.md``).
+
+    Raises
+    ------
+    ConfigError
+        Missing file, invalid TOML, or any invalid key/value (the message names file and key).
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: measure file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+    return measure_from_dict(data, source=path)

@@ -1,0 +1,461 @@
+"""Delayed-curse budgets: integer atoms per coordinate for a tensor-product quantization."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array, as_choice, as_float, as_int
+from ..errors import InvalidInput
+
+__all__ = ["Budget", "Recipe", "budget", "paper_recipe", "RULE_CONSTANT"]
+
+#: Per-coordinate error constant: a 1-D quantization with ``n`` atoms of a law of width ``σ``
+#: has W1 error ≤ ``c σ / n`` (midpoint levels: c = 1/2; the paper's levels i/N, eq. (4.21): c = 1).
+RULE_CONSTANT = {"midpoint": 0.5, "paper": 1.0}
+
+_TOL = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class Recipe:
+    """The paper's simple recipe of §4.5 for eq. (4.22) (label ``delayed``).
+
+    With ``σ`` sorted decreasingly, ``k_bar`` is the smallest k̄ with
+    :math:`\\sum_{k>\\bar k} c\\sigma_k \\le \\varepsilon/2`, and a common
+    :math:`\\mathcal N = \\lceil 2\\sum_{k\\le\\bar k} c\\sigma_k/\\varepsilon\\rceil` is used on
+    those k̄ coordinates, so :math:`N = \\mathcal N^{\\bar k}` (one atom if k̄ = 0).
+    """
+
+    eps: float
+    k_bar: int
+    n_common: int
+    n_atoms: int
+    bound: float
+
+
+@dataclass(frozen=True, eq=False)
+class Budget:
+    """Atoms per coordinate ``N_j`` for a tensor product, with the bound they guarantee.
+
+    Attributes
+    ----------
+    widths : (d,) ndarray -- the σⱼ, in the caller's order
+    counts : tuple of int -- ``N_j`` per coordinate (same order)
+    n_atoms : int -- ``N = ∏ N_j`` (exact Python int)
+    bound : float -- ``Σ c σⱼ / N_j``
+    k_bar : int -- number of coordinates with ``N_j > 1``
+    rule : str, c : float -- quantization rule and its constant (:data:`RULE_CONSTANT`)
+    eps, atoms : the target that was given (the other is None)
+    optimal : bool -- True when the branch and bound proved optimality
+    lower_bound : float -- certified lower bound from the continuous relaxation: on the optimal
+        atom count (eps mode) or on the optimal bound (atoms mode)
+    recipe : Recipe -- the paper's recipe at the same ε (atoms mode: at ε = the bound reached)
+    nodes : int -- branch-and-bound nodes visited
+    """
+
+    widths: np.ndarray
+    counts: tuple
+    n_atoms: int
+    bound: float
+    k_bar: int
+    rule: str
+    c: float
+    eps: float | None
+    atoms: int | None
+    optimal: bool
+    lower_bound: float
+    recipe: Recipe
+    nodes: int
+
+
+def paper_recipe(widths, eps: float, *, rule: str = "midpoint") -> Recipe:
+    """The paper's recipe for eq. (4.22) (label ``delayed``); see :class:`Recipe`.
+
+    Examples
+    --------
+    >>> r = paper_recipe([1.0, 0.5, 0.01], 0.5, rule="paper")
+    >>> r.k_bar, r.n_common, r.n_atoms
+    (2, 6, 36)
+    """
+    widths = _widths(widths)
+    eps = as_float(eps, "eps", low=0.0, low_open=True)
+    rule = as_choice(rule, "rule", RULE_CONSTANT)
+    c = RULE_CONSTANT[rule]
+    s = np.sort(c * widths)[::-1]
+    tail = np.concatenate([np.cumsum(s[::-1])[::-1], [0.0]])  # tail[k] = Σ_{i>=k} s_i
+    k_bar = int(np.argmax(tail <= eps / 2 * (1 + _TOL)))
+    if k_bar == 0:
+        return Recipe(eps, 0, 1, 1, float(tail[0]))
+    head = float(s[:k_bar].sum())
+    n = max(1, math.ceil(head / (eps / 2) * (1 - _TOL)))
+    while head / n > eps / 2 * (1 + _TOL):
+        n += 1
+    return Recipe(eps, k_bar, n, n**k_bar, head / n + float(tail[k_bar]))
+
+
+def _widths(widths) -> np.ndarray:
+    w = as_array(widths, "widths", ndim=1)
+    if w.size < 1:
+        raise InvalidInput("widths must hold at least one width, got an empty array")
+    if np.any(w < 0):
+        i = int(np.argmin(w))
+        raise InvalidInput(f"widths must be >= 0, got {w[i]} at index {i}")
+    return w
+
+
+class _Abort(Exception):
+    pass
+
+
+class _Solver:
+    """Branch and bound over non-increasing integer vectors for decreasing s > 0."""
+
+    def __init__(self, s: np.ndarray, node_limit: int):
+        self.s = s
+        self.d = s.size
+        self.T = np.concatenate([np.cumsum(s[::-1])[::-1], [0.0]])
+        self.L = np.concatenate([[0.0], np.cumsum(np.log(s))])
+        self.nodes = 0
+        self.node_limit = node_limit
+
+    def _tick(self):
+        self.nodes += 1
+        if self.nodes > self.node_limit:
+            raise _Abort
+
+    # ---- eps mode: min Σ log N s.t. Σ s/N ≤ e --------------------------------------------
+    def cont_eps(self, j: int, e: float) -> tuple[float, float]:
+        """Continuous relaxation on suffix j: (min Σ log N_i, multiplier μ); N_i = max(1, μ s_i)."""
+        T, s, d = self.T, self.s, self.d
+        if T[j] <= e * (1 + _TOL):
+            return 0.0, 0.0
+        if e <= 0:
+            return math.inf, math.inf
+        for m in range(1, d - j + 1):
+            rest = e - T[j + m]
+            if rest <= 0:
+                continue
+            mu = m / rest
+            if mu * s[j + m - 1] >= 1 - 1e-12 and (j + m == d or mu * s[j + m] <= 1 + 1e-12):
+                return m * math.log(mu) + (self.L[j + m] - self.L[j]), mu
+        return 0.0, 0.0  # numerical corner: trivial (valid) lower bound
+
+    def solve_eps(self, eps: float, incumbent: list[int]) -> tuple[list[int], bool]:
+        self.best = list(incumbent)
+        self.best_P = math.prod(incumbent)
+        try:
+            self._dfs_eps(0, eps, None, 1, [])
+            return self.best, True
+        except _Abort:
+            return self.best, False
+
+    def _dfs_eps(self, j, e, cap, prod, path):
+        self._tick()
+        s, T = self.s, self.T
+        if T[j] <= e * (1 + _TOL):
+            if prod < self.best_P:
+                self.best_P, self.best = prod, path + [1] * (self.d - j)
+            return
+        if j == self.d:
+            return
+        if self.best_P - 1 < prod * 2:
+            return
+        thresh = math.log(self.best_P - 1) + 1e-9
+        lo = max(2, math.ceil(T[j] / e * (1 - 1e-12)))
+        while T[j] / lo > e * (1 + _TOL):
+            lo += 1
+        hi = (self.best_P - 1) // prod
+        if cap is not None:
+            hi = min(hi, cap)
+        if lo > hi:
+            return
+        _, mu = self.cont_eps(j, e)
+        start = min(max(int(mu * s[j]), lo), hi)
+        lp = math.log(prod)
+
+        def f(n):
+            e2 = e - s[j] / n
+            if e2 < -1e-15:
+                return math.inf
+            self._tick()
+            return lp + math.log(n) + self.cont_eps(j + 1, max(e2, 0.0))[0]
+
+        cands = []
+        n = start
+        while n >= lo:
+            v = f(n)
+            if v > thresh:
+                break
+            cands.append((v, n))
+            n -= 1
+        n = start + 1
+        while n <= hi:
+            v = f(n)
+            if v > thresh:
+                break
+            cands.append((v, n))
+            n += 1
+        for v, n in sorted(cands):
+            if v > math.log(self.best_P - 1) + 1e-9:
+                continue
+            self._dfs_eps(j + 1, e - s[j] / n, n, prod * n, path + [n])
+
+    # ---- atoms mode: min Σ s/N s.t. Π N ≤ P ------------------------------------------------
+    def cont_atoms(self, j: int, R: float) -> tuple[float, float]:
+        """Continuous relaxation on suffix j with product ≤ R: (min Σ s_i/N_i, ν); N_i = max(1, s_i/ν)."""
+        T, s, d = self.T, self.s, self.d
+        if j >= d:
+            return 0.0, math.inf
+        if R <= 1 + 1e-15:
+            return float(T[j]), math.inf
+        logR = math.log(R)
+        for m in range(1, d - j + 1):
+            nu = math.exp((self.L[j + m] - self.L[j] - logR) / m)
+            if s[j + m - 1] >= nu * (1 - 1e-12) and (j + m == d or s[j + m] <= nu * (1 + 1e-12)):
+                return m * nu + float(T[j + m]), nu
+        return 0.0, math.inf
+
+    def solve_atoms(self, P: int, incumbent: list[int]) -> tuple[list[int], bool]:
+        self.best = list(incumbent)
+        self.best_v = self.value(incumbent)
+        try:
+            self._dfs_atoms(0, P, None, 0.0, [])
+            return self.best, True
+        except _Abort:
+            return self.best, False
+
+    def value(self, N) -> float:
+        return float(sum(si / ni for si, ni in zip(self.s, N)))
+
+    def _dfs_atoms(self, j, R, cap, cur, path):
+        self._tick()
+        s, T = self.s, self.T
+        if j == self.d or R == 1 or cap == 1:
+            v = cur + float(T[j])
+            if v < self.best_v * (1 - 1e-13):
+                self.best_v, self.best = v, path + [1] * (self.d - j)
+            return
+        thresh = self.best_v * (1 - 1e-13)
+        hi = R if cap is None else min(cap, R)
+        if j == self.d - 1:
+            v = cur + s[j] / hi
+            if v < thresh:
+                self.best_v, self.best = v, path + [hi]
+            return
+        _, nu = self.cont_atoms(j, R)
+        start = min(max(int(s[j] / nu) if nu > 0 and math.isfinite(nu) else 1, 1), hi)
+
+        def f(n):
+            self._tick()
+            return cur + s[j] / n + max(self.cont_atoms(j + 1, R / n)[0], float(T[j + 1]) / n)
+
+        cands = []
+        n = start
+        while n >= 1:
+            v = f(n)
+            if v >= thresh:
+                break
+            cands.append((v, n))
+            n -= 1
+        n = start + 1
+        while n <= hi:
+            v = f(n)
+            if v >= thresh:
+                break
+            cands.append((v, n))
+            n += 1
+        for v, n in sorted(cands):
+            if v >= self.best_v * (1 - 1e-13):
+                continue
+            self._dfs_atoms(j + 1, R // n, n, cur + s[j] / n, path + [n])
+
+
+def _local_eps(s, N, eps):
+    """Local improvement: drop atoms while feasible, then trade (N_i−1, N_j+1) pairs."""
+    N = list(N)
+    tot = sum(si / ni for si, ni in zip(s, N))
+    changed = True
+    while changed:
+        changed = False
+        for j in sorted(range(len(N)), key=lambda i: N[i]):
+            while N[j] > 1:
+                new = tot - s[j] / N[j] + s[j] / (N[j] - 1)
+                if new <= eps * (1 + _TOL):
+                    tot, N[j] = new, N[j] - 1
+                    changed = True
+                else:
+                    break
+        act = [i for i in range(len(N)) if N[i] > 1]
+        for i in act:
+            for j in act:
+                if i != j and 1 < N[i] <= N[j]:  # (N_i - 1)(N_j + 1) < N_i N_j
+                    new = tot - s[i] / N[i] + s[i] / (N[i] - 1) - s[j] / N[j] + s[j] / (N[j] + 1)
+                    if new <= eps * (1 + _TOL):
+                        tot = new
+                        N[i] -= 1
+                        N[j] += 1
+                        changed = True
+    return N
+
+
+def _round_eps(s, eps, mu):
+    """Smallest scaling t ≤ 1 of the continuous solution whose ceiling is still feasible."""
+    def vec(t):
+        return [max(1, math.ceil(t * mu * si - 1e-9)) for si in s]
+
+    def ok(N):
+        return sum(si / ni for si, ni in zip(s, N)) <= eps * (1 + _TOL)
+
+    t_hi = 1.0
+    while not ok(vec(t_hi)):
+        t_hi *= 1.5
+    t_lo = 0.0
+    for _ in range(60):
+        t = 0.5 * (t_lo + t_hi)
+        if ok(vec(t)):
+            t_hi = t
+        else:
+            t_lo = t
+    return vec(t_hi)
+
+
+def _floor_atoms(s, P, nu):
+    """Round the continuous optimum ``N_j = max(1, s_j/ν)`` down (feasible: ∏ ≤ P)."""
+    N = [max(1, int(math.floor(sj / nu * (1 + 1e-12)))) if math.isfinite(nu) else 1 for sj in s]
+    while math.prod(N) > P:  # guard against rounding up by the tolerance
+        j = max(range(len(N)), key=lambda i: N[i])
+        N[j] -= 1
+    return N
+
+
+def _pairs(N):
+    act = [i for i in range(len(N)) if N[i] > 1]
+    nxt = next((i for i in range(len(N)) if N[i] == 1), None)
+    return act, act + ([nxt] if nxt is not None else [])
+
+
+def _local_atoms(s, N, P):
+    N = list(N)
+    changed = True
+    while changed:
+        changed = False
+        prod = math.prod(N)
+        for j in range(len(N)):  # add atoms while the product allows
+            if prod // N[j] * (N[j] + 1) <= P:
+                N2 = P // (prod // N[j])  # raise N_j as far as the product allows
+                prod = prod // N[j] * N2
+                N[j] = N2
+                changed = True
+            if N[j] == 1:
+                break
+        act, targets = _pairs(N)
+        for i in act:
+            for j in targets:
+                if i == j or N[i] < 2:
+                    continue
+                for di, dj in ((N[i] - 1, N[j] + 1), (N[i] // 2, N[j] * 2)):
+                    if di < 1:
+                        continue
+                    p2 = prod // (N[i] * N[j]) * di * dj
+                    if p2 <= P and s[i] / di + s[j] / dj < s[i] / N[i] + s[j] / N[j] - 1e-15:
+                        N[i], N[j], prod = di, dj, p2
+                        changed = True
+    return N
+
+
+def budget(widths, *, eps: float | None = None, atoms: int | None = None,
+           rule: str = "midpoint", node_limit: int = 20000) -> Budget:
+    """Atoms per coordinate for the delayed curse of dimension, eq. (4.22) of the paper (label ``delayed``).
+
+    A tensor product of 1-D laws of widths σⱼ, each quantized with ``N_j`` atoms, has
+    (Lemma 4.1, label ``lem:W:tensors``, with the 1-D bound ``c σ / N``)
+
+    .. math:: W_1(\\mu, \\mu^N) \\le \\sum_j \\frac{c\\,\\sigma_j}{N_j}, \\qquad N = \\prod_j N_j,
+
+    with ``c = 1/2`` for midpoint levels and ``c = 1`` for the paper's levels (eq. (4.21)).
+    With ``eps`` this returns integer ``N_j ≥ 1`` minimizing ``N`` subject to the bound
+    ``≤ eps``; with ``atoms`` it minimizes the bound subject to ``N ≤ atoms``.
+
+    Method and guarantee: the continuous relaxation (``N_j = max(1, λ c σⱼ)``, solved exactly
+    through its KKT conditions) gives a certified lower bound; an integer solution is built by
+    rounding it (and, in eps mode, compared with the paper's recipe, which is always feasible),
+    improved by local moves, and then a branch and bound over non-increasing vectors (some
+    optimum sorts like σ, by an exchange argument) pruned with the continuous relaxation of
+    every sub-problem proves it optimal or improves it. When the search finishes within
+    ``node_limit`` nodes ``optimal`` is True and the result is an exact optimum; otherwise it
+    is the best vector found (never worse than the paper's recipe) and ``lower_bound`` bounds
+    the gap. Coordinates with σⱼ = 0 cost one atom.
+
+    Parameters
+    ----------
+    widths : (d,) array_like -- σⱼ ≥ 0
+    eps : float, optional -- target bound (> 0)
+    atoms : int, optional -- atom budget (≥ 1); give exactly one of eps and atoms
+    rule : {"midpoint", "paper"}
+    node_limit : int -- branch-and-bound nodes before giving up the optimality proof
+
+    Returns
+    -------
+    Budget
+
+    Examples
+    --------
+    >>> b = budget([1.0, 0.5, 0.25, 0.0], eps=0.25)
+    >>> b.counts, b.n_atoms, round(b.bound, 4), b.k_bar, b.optimal
+    ((5, 3, 2, 1), 30, 0.2458, 3, True)
+    >>> b.recipe.n_atoms
+    36
+    >>> budget([1.0, 0.5], atoms=10).counts
+    (5, 2)
+    """
+    w = _widths(widths)
+    rule = as_choice(rule, "rule", RULE_CONSTANT)
+    c = RULE_CONSTANT[rule]
+    node_limit = as_int(node_limit, "node_limit", low=0)
+    if (eps is None) == (atoms is None):
+        raise InvalidInput("give exactly one of eps (target W1 bound) and atoms (atom budget)")
+    d = w.size
+    order = np.argsort(-w, kind="stable")
+    pos = order[w[order] > 0]
+    s = c * w[pos]
+    counts = [1] * d
+    if eps is not None:
+        eps = as_float(eps, "eps", low=0.0, low_open=True)
+        recipe = paper_recipe(w, eps, rule=rule)
+        if s.size == 0 or s.sum() <= eps * (1 + _TOL):
+            nodes, optimal, lower, N = 0, True, 1.0, [1] * s.size
+        else:
+            solver = _Solver(s, node_limit)
+            logLB, mu = solver.cont_eps(0, eps)
+            cand = _local_eps(s, _round_eps(s, eps, mu), eps)
+            rec = [recipe.n_common] * recipe.k_bar + [1] * (s.size - recipe.k_bar)
+            if math.prod(rec) < math.prod(cand):
+                cand = _local_eps(s, rec, eps)
+            cand = sorted(cand, reverse=True)  # some optimum is non-increasing along s
+            N, optimal = solver.solve_eps(eps, cand)
+            nodes = solver.nodes
+            lower = math.exp(logLB)
+    else:
+        atoms = as_int(atoms, "atoms", low=1)
+        if s.size == 0:
+            N, optimal, nodes, lower = [], True, 0, 0.0
+        else:
+            solver = _Solver(s, node_limit)
+            lower, nu = solver.cont_atoms(0, float(atoms))
+            cand = sorted(_local_atoms(s, _floor_atoms(s, atoms, nu), atoms), reverse=True)
+            N, optimal = solver.solve_atoms(atoms, cand)
+            nodes = solver.nodes
+    for p, n in zip(pos, N):
+        counts[int(p)] = int(n)
+    bound = float(sum(c * wi / ni for wi, ni in zip(w, counts)))
+    if atoms is not None:
+        recipe = paper_recipe(w, bound, rule=rule) if bound > 0 else Recipe(0.0, 0, 1, 1, 0.0)
+    n_atoms = math.prod(counts)
+    return Budget(
+        widths=w, counts=tuple(counts), n_atoms=n_atoms, bound=bound,
+        k_bar=sum(1 for n in counts if n > 1), rule=rule, c=c, eps=eps, atoms=atoms,
+        optimal=bool(optimal), lower_bound=float(lower), recipe=recipe, nodes=int(nodes),
+    )

@@ -1,0 +1,93 @@
+"""numba kernels vs numpy twins, kernel closed forms."""
+
+import math
+
+import numpy as np
+import pytest
+
+from kinred.dynamics import CuckerSmale, Morse, Quadratic, _kernels
+
+
+@pytest.mark.parametrize("k", [1, 2, 10, 57, 200])
+def test_sqdist_numba_equals_numpy_twin(k):
+    rng = np.random.default_rng(k)
+    Y = rng.normal(size=(120, k))
+    Y[5] = Y[7]                      # coincident pair
+    Y[9] = Y[11] + 1e-9              # very close pair (fallback path)
+    Y[20:30] += 1e3                  # a far cluster
+    Y -= Y.mean(axis=0)
+    n = np.einsum("ij,ij->i", Y, Y)
+    out = np.empty((40, 120 - 3))
+    _kernels.sqdist_block(Y[3:43], Y[3:], n[3:43], n[3:], out)
+    ref = _kernels.sqdist_numpy(Y[3:43], Y[3:])
+    mask = ref > 0
+    assert np.all(out[~mask] == 0.0)
+    assert np.max(np.abs(out[mask] - ref[mask]) / ref[mask]) < 1e-12
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.5, 1.5, 3.0, 10.0])
+def test_cs_halfint_equals_twin(beta):
+    rng = np.random.default_rng(1)
+    q = rng.exponential(5.0, (17, 33)) ** 2
+    q[0, 0] = 0.0
+    q[1, 1] = 1e12
+    out = np.empty_like(q)
+    _kernels.cs_halfint(q, 0.7, int(2 * beta), out)
+    ref = _kernels.cs_numpy(q, 0.7, beta)
+    assert np.max(np.abs(out - ref) / ref) < 1e-12
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.3, 1.5, 1.62, 1.7, 10.0])
+def test_cucker_smale_value_sq_matches_formula(beta):
+    g = CuckerSmale(G=0.8, beta=beta)
+    s = np.concatenate([[0.0], np.geomspace(1e-8, 1e150, 200)])
+    q = (s * s).reshape(1, -1)
+    got = g.value_sq(q, np.empty_like(q))[0]
+    with np.errstate(over="ignore"):
+        ref = 0.8 / (1.0 + s * s) ** beta       # direct formula (inf**beta -> 0)
+    assert np.all(np.isfinite(got))
+    big = ref > 1e-280
+    assert np.max(np.abs(got[big] - ref[big]) / ref[big]) < 1e-12
+    assert np.all(got[~big] < 1e-270)
+
+
+@pytest.mark.parametrize("beta", [0.25, 1.5, 1.62, 10.0])
+def test_cucker_smale_sup_and_lipschitz_against_numerical_maxima(beta):
+    g = CuckerSmale(G=1.3, beta=beta)
+    s = np.linspace(0, 5, 2_000_001)
+    assert g.sup_norm() == pytest.approx(float(np.max(g(s))), rel=1e-15)
+    dg = 1.3 * 2 * beta * s / (1 + s * s) ** (beta + 1)
+    assert g.lipschitz() == pytest.approx(float(np.max(dg)), rel=1e-9)
+
+
+def test_morse_coincident_and_bounded_force():
+    m = Morse(Ca=1.0, la=2.0, Cr=1.5, lr=0.5)
+    s = np.concatenate([[0.0], np.geomspace(1e-300, 1e3, 500)])
+    u = m(s)
+    assert u[0] == 0.0 and np.all(np.isfinite(u))
+    assert np.max(np.abs(u * s)) <= m.force_sup() * (1 + 1e-12)
+    assert m.sup_norm() == math.inf and m.lipschitz() == math.inf
+
+
+def test_morse_soft_sup_lipschitz_against_grid():
+    m = Morse(Ca=1.0, la=2.0, Cr=1.5, lr=0.5, soft=0.3)
+    s = np.linspace(0, 30, 3_000_001)
+    assert m.sup_norm() == pytest.approx(float(np.max(np.abs(m(s)))), rel=1e-8)
+    num = np.abs(np.gradient(m(s), s))
+    assert m.lipschitz() == pytest.approx(float(np.max(num)), rel=1e-5)
+    # u(s) = U'(r)/r with r = sqrt(s^2 + eps^2), checked against the closed form
+    r = np.sqrt(s[:50] ** 2 + 0.09)
+    ref = (1.0 / 2.0 * np.exp(-r / 2.0) - 1.5 / 0.5 * np.exp(-r / 0.5)) / r
+    assert np.allclose(m(s[:50]), ref, rtol=1e-13, atol=0)
+
+
+def test_quadratic():
+    assert Quadratic(2.5).sup_norm() == 2.5 and Quadratic(2.5).lipschitz() == 0.0
+
+
+def test_invalid_kernel_parameters():
+    from kinred.errors import InvalidInput
+    with pytest.raises(InvalidInput, match="beta"):
+        CuckerSmale(G=1.0, beta=-1.0)
+    with pytest.raises(InvalidInput, match="la"):
+        Morse(la=0.0)

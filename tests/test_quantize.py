@@ -1,0 +1,346 @@
+"""Quantization: closed forms, the lemmas' bounds against independent W1 values, budgets
+against brute force and the paper's recipe, streaming and refusal."""
+
+import math
+
+import numpy as np
+import ot
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import integrate, stats
+
+from kinred.errors import InvalidInput, TooLarge
+from kinred.measures import (
+    Atomic,
+    Dirac,
+    Empirical1D,
+    Mixture,
+    TensorProduct,
+    Uniform,
+    Univariate,
+)
+from kinred.quantize import budget, paper_recipe, quantize, quantize_1d
+
+
+# ---------------------------------------------------------------------------------- 1-D
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 50, 400])
+@pytest.mark.parametrize("a,b", [(0.0, 1.0), (-3.0, 2.5), (100.0, 100.25)])
+def test_uniform_closed_forms(n, a, b):
+    sigma = b - a
+    qp = quantize_1d(Uniform(a, b), n, rule="paper")
+    qm = quantize_1d(Uniform(a, b), n, rule="midpoint")
+    assert qp.points[0] == a  # x0 = a, eq. (4.20)
+    assert math.isclose(qp.error, sigma / (2 * n), rel_tol=1e-9)
+    assert math.isclose(qm.error, sigma / (4 * n), rel_tol=1e-9)
+    assert qp.bound == pytest.approx(sigma / n) and qm.bound == pytest.approx(sigma / (2 * n))
+    np.testing.assert_allclose(qm.points, a + sigma * (2 * np.arange(1, n + 1) - 1) / (2 * n))
+
+
+def _w1_cdf_quad(mu, pts):
+    """Independent W1 in x-space: ∫ |F(x) − G(x)| dx with G the step CDF of equal-weight atoms."""
+    a, b = mu.support
+    n = pts.size
+    # breakpoints: the atoms (jumps of G) and where F crosses the levels k/n (kinks of |F − G|;
+    # located with ppf, which only helps quad and cannot bias the integral)
+    br = np.unique(np.concatenate([[a, b], pts, mu.ppf(np.arange(1, n) / n)]))
+    total = 0.0
+    for lo, hi in zip(br[:-1], br[1:]):
+        G = np.searchsorted(pts, 0.5 * (lo + hi), side="right") / n
+        total += integrate.quad(lambda x: abs(float(mu.cdf(x)) - G), lo, hi,
+                                epsabs=1e-13, epsrel=1e-11, limit=200)[0]
+    return total
+
+
+@pytest.mark.parametrize("mu", [
+    Univariate(stats.beta(2, 3)),
+    Univariate(stats.beta(0.5, 0.7)),
+    Univariate(stats.norm(0.3, 0.5), support=(-1.0, 1.0)),
+    Univariate(stats.expon(scale=0.4), support=(0.0, 2.0)),
+])
+@pytest.mark.parametrize("rule", ["paper", "midpoint"])
+def test_exact_1d_error_matches_cdf_integral(mu, rule):
+    q = quantize_1d(mu, 9, rule=rule)
+    assert q.error == pytest.approx(_w1_cdf_quad(mu, q.points), rel=1e-7, abs=1e-10)
+
+
+@given(st.floats(0.3, 8.0), st.floats(0.3, 8.0), st.integers(1, 60), st.sampled_from(["paper", "midpoint"]))
+def test_1d_error_below_bound_beta(a, b, n, rule):
+    q = quantize_1d(Univariate(stats.beta(a, b)), n, rule=rule)
+    assert 0.0 <= q.error <= q.bound * (1 + 1e-9)
+    assert q.error_tol < 1e-8
+
+
+@settings(max_examples=15)
+@given(st.floats(-3.0, 2.0), st.floats(0.1, 4.0), st.floats(0.2, 3.0), st.integers(1, 40))
+def test_midpoint_beats_paper_and_both_below_bound_truncnormal(lo, width, scale, n):
+    mu = Univariate(stats.norm(0.0, scale), support=(lo, lo + width))
+    qp = quantize_1d(mu, n, rule="paper")
+    qm = quantize_1d(mu, n, rule="midpoint")
+    assert qp.error <= qp.bound * (1 + 1e-9)
+    assert qm.error <= qm.bound * (1 + 1e-9)
+    # medians of the quantile cells are the W1-optimal equal-weight atoms
+    assert qm.error <= qp.error + 1e-12
+
+
+@given(st.lists(st.floats(-5, 5), min_size=1, max_size=30), st.integers(1, 12))
+def test_empirical_exact_error_against_pot(values, n):
+    mu = Empirical1D(values)
+    q = quantize_1d(mu, n)
+    want = ot.wasserstein_1d(np.asarray(values, float), q.points, p=1)
+    assert q.error == pytest.approx(float(want), abs=1e-10)
+    assert q.error <= q.bound + 1e-12
+
+
+# ---------------------------------------------------------------------------------- budgets
+def _brute_eps(s, eps):
+    P0 = math.prod(max(1, math.ceil(len(s) * x / eps)) for x in s)
+    best = None
+    ranges = [range(1, P0 + 1) if x > 0 else range(1, 2) for x in s]
+
+    def rec(j, prod, tot):
+        nonlocal best
+        if j == len(s):
+            if tot <= eps * (1 + 1e-12) and (best is None or prod < best):
+                best = prod
+            return
+        for n in ranges[j]:
+            if prod * n > P0 or (best is not None and prod * n >= best):
+                break
+            rec(j + 1, prod * n, tot + s[j] / n)
+
+    rec(0, 1, 0.0)
+    return best
+
+
+def _brute_atoms(s, P):
+    best = math.inf
+
+    def rec(j, prod, tot):
+        nonlocal best
+        if j == len(s):
+            best = min(best, tot)
+            return
+        n = 1
+        while prod * n <= P:
+            rec(j + 1, prod * n, tot + s[j] / n)
+            n += 1
+
+    rec(0, 1, 0.0)
+    return best
+
+
+widths_small = st.lists(st.one_of(st.just(0.0), st.floats(0.01, 2.0)), min_size=1, max_size=4)
+
+
+@given(widths_small, st.floats(0.05, 1.0), st.sampled_from(["paper", "midpoint"]))
+def test_budget_eps_is_optimal_vs_brute_force(w, eps, rule):
+    c = {"paper": 1.0, "midpoint": 0.5}[rule]
+    b = budget(w, eps=eps, rule=rule)
+    s = [c * x for x in w]
+    assert b.bound <= eps * (1 + 1e-9)
+    assert sum(x / n for x, n in zip(s, b.counts)) == pytest.approx(b.bound)
+    if math.prod(max(1, math.ceil(len(s) * x / eps)) for x in s) <= 3000:
+        assert b.optimal
+        assert b.n_atoms == _brute_eps(s, eps)
+    assert b.lower_bound <= b.n_atoms * (1 + 1e-9)
+    assert all(n == 1 for x, n in zip(w, b.counts) if x == 0)  # σ = 0 costs one atom
+
+
+@given(widths_small, st.integers(1, 300), st.sampled_from(["paper", "midpoint"]))
+def test_budget_atoms_is_optimal_vs_brute_force(w, P, rule):
+    c = {"paper": 1.0, "midpoint": 0.5}[rule]
+    b = budget(w, atoms=P, rule=rule)
+    assert b.n_atoms <= P and b.optimal
+    assert b.bound == pytest.approx(_brute_atoms([c * x for x in w], P), rel=1e-12, abs=1e-15)
+    assert b.lower_bound <= b.bound * (1 + 1e-9)
+
+
+@given(st.floats(0.3, 0.95), st.integers(1, 80), st.floats(0.005, 2.0), st.sampled_from(["paper", "midpoint"]))
+def test_budget_beats_or_equals_paper_recipe(r, d, eps, rule):
+    w = r ** np.arange(d)
+    b = budget(w, eps=eps, rule=rule, node_limit=300)
+    rec = paper_recipe(w, eps, rule=rule)
+    assert b.bound <= eps * (1 + 1e-9)
+    assert rec.bound <= eps * (1 + 1e-9)  # the recipe itself meets eq. (4.22)
+    assert b.n_atoms <= rec.n_atoms
+    assert b.lower_bound <= b.n_atoms * (1 + 1e-9)
+
+
+def test_paper_recipe_by_hand():
+    # σ = (1, 0.5, 0.25, 0.125), paper rule, ε = 0.5: tail beyond k̄ = 2 is 0.375 > 0.25,
+    # beyond k̄ = 3 is 0.125 ≤ 0.25 → k̄ = 3; 𝒩 = ⌈1.75 / 0.25⌉ = 7; N = 343
+    r = paper_recipe([0.125, 1.0, 0.25, 0.5], 0.5, rule="paper")
+    assert (r.k_bar, r.n_common, r.n_atoms) == (3, 7, 343)
+    assert r.bound == pytest.approx(1.75 / 7 + 0.125)
+
+
+def test_budget_validation():
+    with pytest.raises(InvalidInput, match="exactly one"):
+        budget([1.0], eps=0.1, atoms=3)
+    with pytest.raises(InvalidInput, match="exactly one"):
+        budget([1.0])
+    with pytest.raises(InvalidInput, match="widths must be >= 0"):
+        budget([1.0, -0.1], eps=0.1)
+    with pytest.raises(InvalidInput, match="eps must be > 0"):
+        budget([1.0], eps=0.0)
+    with pytest.raises(InvalidInput, match="rule"):
+        budget([1.0], eps=0.1, rule="gauss")
+
+
+# ---------------------------------------------------------------------------------- lemmas
+def _fine(mu, n):
+    """A fine tensor quantization (its own bound is known) for reference W1 values."""
+    return quantize(mu, atoms=n)
+
+
+factor = st.one_of(
+    st.builds(lambda lo, w: Uniform(lo, lo + w), st.floats(-1, 1), st.floats(0.05, 1.5)),
+    st.builds(lambda a, b: Univariate(stats.beta(a, b)), st.floats(0.5, 5), st.floats(0.5, 5)),
+    st.builds(lambda x: Dirac(x), st.floats(-1, 1)),
+)
+
+
+@given(st.lists(factor, min_size=1, max_size=3), st.integers(2, 40), st.sampled_from(["paper", "midpoint"]))
+def test_tensor_bound_holds_against_independent_w1(factors, atoms, rule):
+    mu = TensorProduct(factors)
+    q = quantize(mu, atoms=atoms, rule=rule)
+    assert q.n_atoms <= atoms
+    A = q.materialize()
+    # product-ℓ1 W1 = Σ marginal W1s, each computed by POT from the atoms' marginals against a
+    # fine 1-D quantization of the factor (error ≤ σ/4000)
+    l1 = 0.0
+    slack = 0.0
+    for j, f in enumerate(factors):
+        if isinstance(f, Dirac):
+            ref, wref, e = np.array([f.x[0]]), np.array([1.0]), 0.0
+        else:
+            fq = quantize_1d(f, 2000)
+            ref, wref, e = fq.points, fq.weights, fq.bound
+        l1 += float(ot.wasserstein_1d(A.points[:, j], ref, A.weights, wref, p=1))
+        slack += e
+    assert l1 == pytest.approx(q.error, abs=slack + 1e-9)  # the exact product-ℓ1 value
+    assert q.error <= q.bound * (1 + 1e-9)  # Lemma 4.1
+    # Euclidean W1 (exact LP) against a fine grid: ≤ product-ℓ1 ≤ bound (up to the fine error)
+    fine = _fine(mu, 3000)
+    F = fine.materialize()
+    M = ot.dist(A.points, F.points, metric="euclidean")
+    w1 = float(ot.emd2(A.weights, F.weights, M, numItermax=10**7))
+    assert w1 <= q.error + fine.bound + 1e-9
+
+
+@given(st.lists(st.tuples(st.floats(-1, 1), st.floats(0.05, 1.0), st.floats(0.05, 1.0)), min_size=1, max_size=3),
+       st.lists(st.floats(0.05, 1.0), min_size=3, max_size=3), st.floats(0.1, 0.5))
+def test_mixture_bound_holds_against_exact_emd(boxes, raw_w, eps):
+    comps = [TensorProduct([Uniform(x, x + wx), Univariate(stats.beta(2, 3), support=None)])
+             if k % 2 else TensorProduct([Uniform(x, x + wx), Uniform(0, wy)])
+             for k, (x, wx, wy) in enumerate(boxes)]
+    w = np.asarray(raw_w[: len(comps)])
+    w = w / w.sum()
+    mu = Mixture(comps, w)
+    q = quantize(mu, eps=eps)
+    assert q.bound <= eps * (1 + 1e-9)
+    assert q.error <= q.bound * (1 + 1e-9)
+    A = q.materialize()
+    assert A.weights.min() > 0 and A.weights.sum() == pytest.approx(1.0)
+    if A.n_atoms > 200:
+        return
+    fine = quantize(mu, eps=0.02)
+    F = fine.materialize()
+    w1 = float(ot.emd2(A.weights, F.weights, ot.dist(A.points, F.points, metric="euclidean"),
+                       numItermax=10**7))
+    assert w1 <= q.bound + fine.bound + 1e-9  # Lemma 4.2 with unequal weights and counts
+
+
+@given(st.integers(1, 3), st.integers(0, 2**31), st.floats(0.1, 0.6))
+def test_push_bound_scales_with_norm(k, seed, eps):
+    rng = np.random.default_rng(seed)
+    mu = TensorProduct([Uniform(0, 1), Univariate(stats.beta(2, 2)), Uniform(-0.2, 0.2)])
+    M = rng.standard_normal((k, 3))
+    q = quantize(mu.push(M), eps=eps)
+    norm = np.linalg.norm(M, 2)
+    assert q.bound <= eps * (1 + 1e-9)
+    assert q.bound == pytest.approx(norm * q.base.bound)
+    A = q.materialize()
+    np.testing.assert_allclose(A.points, q.base.materialize().points @ M.T, atol=1e-12)
+    if A.n_atoms > 300:
+        return
+    F = quantize(mu, atoms=2000)
+    Fp = F.materialize().push(M)
+    w1 = float(ot.emd2(A.weights, Fp.weights, ot.dist(A.points, Fp.points, metric="euclidean"),
+                       numItermax=10**7))
+    assert w1 <= q.bound + norm * F.bound + 1e-9
+
+
+# ---------------------------------------------------------------------------------- objects
+def test_streaming_reproduces_materialize():
+    mu = Mixture([
+        TensorProduct([Uniform(0, 1), Dirac(2.0), Univariate(stats.beta(2, 2))]),
+        TensorProduct([Uniform(0, 0.1), Uniform(0, 3), Uniform(1, 2)]),
+    ], [0.4, 0.6])
+    q = quantize(mu, atoms=500)
+    A = q.materialize()
+    for size in (1, 7, 64, 10_000):
+        chunks = list(q.iter_chunks(size))
+        assert all(len(p) <= size for p, _ in chunks)
+        np.testing.assert_array_equal(np.concatenate([p for p, _ in chunks]), A.points)
+        np.testing.assert_allclose(np.concatenate([w for _, w in chunks]), A.weights, rtol=1e-12)
+    # the grid is C-ordered: atom index → mixed-radix digits (last coordinate fastest)
+    tq = q.components[1]
+    i = 37
+    digits = np.unravel_index(i, tq.counts)
+    want = [f.points[d] for f, d in zip(tq.factors, digits)]
+    np.testing.assert_array_equal(next(tq.iter_chunks(1, start=i))[0][0], want)
+
+
+def test_huge_count_known_without_materializing():
+    mu = TensorProduct([Uniform(0, 0.9**j) for j in range(120)])
+    q = quantize(mu, eps=0.02)
+    assert isinstance(q.n_atoms, int) and q.n_atoms == math.prod(q.counts) and q.n_atoms > 10**40
+    assert q.bound <= 0.02 * (1 + 1e-9)
+    with pytest.raises(TooLarge, match=r"atoms in dimension 120.*max_atoms=1000.*iter_chunks"):
+        q.materialize(max_atoms=1000)
+    # streaming far into the grid: the first coordinates (slowest digits) sit at their first atom
+    start = 10**15
+    P, W = next(q.iter_chunks(3, start=start))
+    assert P.shape == (3, 120)
+    digits = []
+    rest = start
+    for n in reversed(q.counts):
+        digits.append(rest % n)
+        rest //= n
+    digits = digits[::-1]
+    np.testing.assert_array_equal(P[0], [f.points[d] for f, d in zip(q.factors, digits)])
+    assert W[0] == pytest.approx(1.0 / q.n_atoms, rel=1e-9)
+
+
+def test_atomic_and_dirac_are_exact():
+    X = np.array([[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]])
+    q = quantize(Atomic(X, [0.2, 0.3, 0.5]), eps=0.01)
+    assert q.bound == 0 and q.error == 0 and q.n_atoms == 3
+    np.testing.assert_array_equal(q.materialize().points, X)
+    assert quantize(Dirac([1.0, 2.0]), atoms=5).n_atoms == 1
+    with pytest.raises(InvalidInput, match="fewer than"):
+        quantize(Atomic(X), atoms=2)
+    q1 = quantize(Empirical1D(np.arange(10.0)), atoms=2)  # 1-D atomic re-quantized
+    np.testing.assert_array_equal(q1.points, [2.0, 7.0])
+
+
+def test_eps_gives_fewest_atoms_in_1d():
+    mu = Univariate(stats.beta(2, 2))
+    q = quantize(mu, eps=0.01)
+    assert q.n_atoms == 50 and q.bound <= 0.01  # σ/(2N) ≤ 0.01 ⇔ N ≥ 50
+    assert quantize(mu, eps=0.01, rule="paper").n_atoms == 100
+
+
+def test_quantize_validation():
+    with pytest.raises(InvalidInput, match="exactly one"):
+        quantize(Uniform(), eps=0.1, atoms=2)
+    with pytest.raises(InvalidInput, match="Measure"):
+        quantize(np.zeros(3), eps=0.1)
+    with pytest.raises(InvalidInput, match="atoms must be >= 1"):
+        quantize(Uniform(), atoms=0)
+    with pytest.raises(InvalidInput, match="too small for this mixture"):
+        quantize(Mixture([Uniform(), Uniform(1, 2), Uniform(3, 4)]), atoms=2)
+    with pytest.raises(InvalidInput, match="1-D"):
+        quantize_1d(TensorProduct([Uniform(), Uniform()]), 3)
