@@ -1,6 +1,13 @@
 """kinred: interacting-agent systems in high dimension, random projections, kinetic limits.
 
-The public API is re-exported here explicitly; see ``docs/`` for the tour.
+The public API is re-exported here explicitly (nothing else happens on import). The data flow
+of the paper (Fornasier, Haškovec, Vybíral) maps onto the packages::
+
+    measure --quantize--> atoms --simulate(scene)--> mu^N(t) --+
+       |                     |                                 +--> W1 / errors / bounds
+       +--push(M)--> M#mu    +--project(M)--> simulate in R^k --+--> recover (l1)
+
+See ``docs/`` and ``docs/architecture.md``.
 """
 
 __version__ = "0.1.0"
@@ -14,14 +21,70 @@ from .errors import (
     SimulationDiverged,
     TooLarge,
 )
+from .measures import (
+    Atomic,
+    Dirac,
+    Empirical1D,
+    Measure,
+    Mixture,
+    PushForward,
+    TensorProduct,
+    Uniform,
+    Univariate,
+    load_measure,
+)
+from .quantize import Budget, Quantization, budget, paper_recipe, quantize, quantize_1d
+from .distance import SlicedW1Result, W1Result, sliced_w1, w1
+from .projection import (
+    DenseProjection,
+    Projection,
+    as_projection,
+    distortion,
+    jl_matrix,
+    jl_min_dim,
+    trajectory_distortion,
+)
+from .dynamics import (
+    Aggregation,
+    Alignment,
+    AttractionRepulsion,
+    CuckerSmale,
+    Drift,
+    Effect,
+    Field,
+    Morse,
+    Noise,
+    Quadratic,
+    Scene,
+    SelfPropulsion,
+    project_state,
+    set_num_threads,
+)
+from .integrate import METHODS, SaveAt, Trajectory, simulate
+from .observables import centre, flocking_verdict, gamma, lambda_, mean_velocity, relative_error
+from .ensemble import EnsembleResult, grid, run_ensemble
+from .io import ResultFolder
 
 __all__ = [
     "__version__",
-    "KinredError",
-    "InvalidInput",
-    "ConfigError",
-    "SimulationDiverged",
-    "NotConverged",
-    "TooLarge",
-    "NotProjectable",
+    # errors
+    "KinredError", "InvalidInput", "ConfigError", "SimulationDiverged", "NotConverged",
+    "TooLarge", "NotProjectable",
+    # measures and quantization
+    "Measure", "Univariate", "Uniform", "Dirac", "Empirical1D", "TensorProduct", "Mixture",
+    "PushForward", "Atomic", "load_measure",
+    "quantize", "quantize_1d", "budget", "paper_recipe", "Quantization", "Budget",
+    # distances
+    "w1", "sliced_w1", "W1Result", "SlicedW1Result",
+    # projections
+    "Projection", "DenseProjection", "as_projection", "jl_matrix", "jl_min_dim", "distortion",
+    "trajectory_distortion",
+    # dynamics
+    "Scene", "Effect", "Alignment", "AttractionRepulsion", "Aggregation", "SelfPropulsion",
+    "Noise", "Drift", "Field", "CuckerSmale", "Morse", "Quadratic", "project_state",
+    "set_num_threads",
+    "simulate", "SaveAt", "Trajectory", "METHODS",
+    "gamma", "lambda_", "centre", "mean_velocity", "flocking_verdict", "relative_error",
+    # ensembles and results
+    "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
 ]

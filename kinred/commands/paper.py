@@ -1,6 +1,8 @@
 """``kinred paper STUDY``: reproduce the paper's numerical experiments.
 
 * ``kinred paper table1`` -- Table 1 and Figures 1-3 (§3.4.1, flocking from projections).
+* ``kinred paper fig4`` -- Figure 4 (§3.4.2, projection and l1-recovery errors over time).
+* ``kinred paper strategies`` -- the three recovery strategies of §3.3.1 at equal work.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ import sys
 from pathlib import Path
 
 NAME = "paper"
-HELP = "reproduce the paper's experiments (table1)"
+HELP = "reproduce the paper's experiments (table1, fig4, strategies)"
 
 
 def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
@@ -31,11 +33,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _add_common(t1, "kinred-results/table1")
     t1.add_argument("--N", type=int, default=None, help="number of agents (default 1000; quick 200)")
     t1.add_argument("--projections", type=int, default=None, help="projections per k")
+    f4 = sub.add_parser("fig4", help="Figure 4 of §3.4.2")
+    f4.add_argument("--out", default="kinred-results/fig4", help="result folder (default: %(default)s)")
+    f4.add_argument("--quick", action="store_true", help="reduced sizes (N = d = 100)")
+    st = sub.add_parser("strategies", help="the three recovery strategies of §3.3.1")
+    st.add_argument("--quick", action="store_true", help="reduced sizes (N = d = 100)")
+    st.add_argument("--L", type=int, default=5, help="number of projections (default 5)")
 
 
 def run(args) -> int:
     if args.study == "table1":
         return _table1(args)
+    if args.study == "fig4":
+        return _fig4(args)
+    if args.study == "strategies":
+        return _strategies(args)
     raise SystemExit(f"unknown study {args.study}")  # pragma: no cover - argparse guards
 
 
@@ -59,4 +71,27 @@ def _table1(args) -> int:
                               title="Table 1 (paper)"))
     print(f"\nwall time {res.wall_time:.1f} s; results in {Path(args.out).resolve()}"
           f" (table1.json, figures, report.html)", file=sys.stdout)
+    return 0
+
+
+def _fig4(args) -> int:
+    from ..experiments import fig4
+
+    cfg = fig4.Fig4Config.quick() if args.quick else fig4.Fig4Config()
+    res = fig4.run(cfg, out_dir=args.out)
+    print(f"Figure 4 (coupling normalize={cfg.normalize!r}, G={cfg.G:g})")
+    print("relative projection error of v:  " + ", ".join(
+        f"k={k}: max {e.max():.3f}, final {e[-1]:.3f}" for k, e in res.projection_error.items()))
+    print("relative recovery error of v:    " + ", ".join(
+        f"L={L}: max {e.max():.3f}, final {e[-1]:.3f}" for L, e in res.recovery_error.items()))
+    print(f"wall time {res.wall_time:.1f} s; results in {Path(args.out).resolve()}")
+    return 0
+
+
+def _strategies(args) -> int:
+    from ..experiments import fig4
+
+    cfg = fig4.Fig4Config.quick() if args.quick else fig4.Fig4Config()
+    res = fig4.strategies(cfg, L=args.L)
+    print(res.to_text())
     return 0

@@ -1,0 +1,73 @@
+"""`kinred paper table1 --quick`: the paper's qualitative pattern (§3.4.1, Table 1)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from kinred.cli import main
+from kinred.errors import InvalidInput
+from kinred.experiments.table1 import PAPER_TABLE1, Table1Config, format_table
+from kinred.report import validate_report_html
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("table1")
+    code = main(["paper", "table1", "--quick", "--out", str(out), "--executor", "processes",
+                 "--workers", "2", "--no-progress"])
+    assert code == 0
+    return out, json.loads((out / "table1.json").read_text())
+
+
+def test_quick_table1_reproduces_the_papers_pattern(quick_run):
+    _, res = quick_run
+    counts = res["counts"]
+    d = str(res["config"]["d"])
+    # The original system: flocking at 1.5 and 1.62, none at 1.7.
+    assert counts["1.5"][d]["pos"] == 1
+    assert counts["1.62"][d]["pos"] == 1
+    assert counts["1.7"][d]["neg"] == 1
+    n_proj = res["config"]["n_projections"]
+    ks = res["config"]["ks"]
+    # beta = 1.5: every projection flocks for k >= 25.
+    for k in ks:
+        if k >= 25:
+            assert counts["1.5"][str(k)]["pos"] == n_proj, k
+    # beta = 1.7: no projection flocks, at any k.
+    for k in ks:
+        assert counts["1.7"][str(k)]["pos"] == 0, k
+    # beta = 1.62 (the borderline): flocking deteriorates as k falls -- the median final
+    # Gamma grows monotonically from the original down to k = 10.
+    finals = res["gamma_final"]["1.62"]
+    order = [d] + [str(k) for k in sorted(ks, reverse=True) if k >= 10]
+    med = [np.median(finals[k]) for k in order]
+    assert all(a < b for a, b in zip(med, med[1:])), dict(zip(order, med))
+    assert med[0] < 1e-10 < 1e-3 < med[-1]
+
+
+def test_quick_table1_writes_its_result_folder(quick_run):
+    out, res = quick_run
+    assert res["coupling"] == "normalize='sum', G=4.0"
+    assert res["paper"]["1.62"]["25"] == {"pos": 1, "neg": 1, "n/a": 18}
+    html = (out / "report.html").read_text()
+    assert validate_report_html(html) == 3
+    assert (out / "summary.json").exists()
+    assert len(list((out / "store" / "members").glob("*.npz"))) == 3 * (1 + 4 * 5)
+
+
+def test_config_validation():
+    with pytest.raises(InvalidInput, match="record_every"):
+        Table1Config(steps=1501)
+    with pytest.raises(InvalidInput, match="normalize"):
+        Table1Config(normalize="median")
+    with pytest.raises(InvalidInput, match="G must be > 0"):
+        Table1Config(G=0.0)
+
+
+def test_format_table_layout():
+    text = format_table({1.5: PAPER_TABLE1[1.5]})
+    lines = text.splitlines()
+    assert lines[0].startswith("beta = 1.5")
+    assert lines[3] == "200 |   1 |   0 |   0"
+    assert lines[10] == "  2 |   3 |   8 |   9"
