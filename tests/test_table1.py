@@ -71,3 +71,28 @@ def test_format_table_layout():
     assert lines[0].startswith("beta = 1.5")
     assert lines[3] == "200 |   1 |   0 |   0"
     assert lines[10] == "  2 |   3 |   8 |   9"
+
+
+def test_interrupted_table1_resumes_with_the_same_table(tmp_path):
+    from kinred.experiments import table1
+
+    cfg = Table1Config.quick(N=40, steps=200, record_every=50, ks=(10, 2), n_projections=2,
+                             betas=(1.5, 1.7))
+    first = table1.run(cfg, out_dir=tmp_path, executor="serial", progress=False)
+    members = sorted((tmp_path / "store" / "members").glob("*.npz"))
+    assert len(members) == 2 * (1 + 2 * 2)
+    # A killed run leaves some members missing (never half-written ones): remove three.
+    for p in members[3:6]:
+        p.unlink()
+    (tmp_path / "summary.json").unlink()
+    again = table1.run(cfg, out_dir=tmp_path, executor="serial", progress=False, resume=True)
+    assert again.n_loaded == len(members) - 3
+    assert again.counts == first.counts
+    for b in first.gamma:
+        for k in first.gamma[b]:
+            assert np.array_equal(first.gamma[b][k], again.gamma[b][k])
+    # Without --resume an existing store is refused rather than overwritten.
+    from kinred.errors import KinredError
+
+    with pytest.raises(KinredError):
+        table1.run(cfg, out_dir=tmp_path, executor="serial", progress=False)

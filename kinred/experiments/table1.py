@@ -153,6 +153,7 @@ class Table1Result:
     wall_time: float
     executor: str
     workers: int | None
+    n_loaded: int = 0     # members read back from the results store (resumed run)
 
     def to_json(self) -> dict:
         return {
@@ -165,6 +166,7 @@ class Table1Result:
             "gamma_final": {str(b): {str(k): g[:, -1].tolist() for k, g in v.items()}
                             for b, v in self.gamma.items()},
             "wall_time_s": self.wall_time,
+            "members_loaded_from_store": self.n_loaded,
             "executor": self.executor,
             "workers": self.workers,
             "paper": {str(b): {str(k): dict(zip(("pos", "neg", "n/a"), c)) for k, c in v.items()}
@@ -213,7 +215,8 @@ def run(cfg: Table1Config | None = None, *, out_dir=None, executor: str = "proce
             verdicts = [_verdict(float(gi[-1]), cfg.yes_below, cfg.no_above) for gi in g]
             counts[b][dim] = tuple(verdicts.count(v) for v in ("pos", "neg", "n/a"))
             gamma[b][dim] = g
-    result = Table1Result(cfg, counts, t, gamma, wall, ens.executor, workers)
+    result = Table1Result(cfg, counts, t, gamma, wall, ens.executor, workers,
+                          n_loaded=int(np.sum(ens.loaded)))
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
