@@ -64,6 +64,7 @@ from .integrate import METHODS, SaveAt, Trajectory, simulate
 from .observables import centre, flocking_verdict, gamma, lambda_, mean_velocity, relative_error
 from .ensemble import EnsembleResult, grid, run_ensemble
 from .io import ResultFolder
+from . import kinetic
 
 __all__ = [
     "__version__",
@@ -87,4 +88,6 @@ __all__ = [
     "gamma", "lambda_", "centre", "mean_velocity", "flocking_verdict", "relative_error",
     # ensembles and results
     "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
+    # kinetic solutions: kinred.kinetic.solve / reduce / compare / theorem_bound
+    "kinetic",
 ]

@@ -26,6 +26,7 @@ __all__ = ["main", "build_parser"]
 COMMAND_MODULES: tuple[str, ...] = (
     "kinred.commands.demo",
     "kinred.commands.quantize",
+    "kinred.commands.run",
     "kinred.commands.paper",
 )
 

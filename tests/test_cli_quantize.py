@@ -104,13 +104,6 @@ def test_missing_file(capsys):
     assert "not found" in capsys.readouterr().err
 
 
-def test_demo_runs_and_checks_closed_forms(capsys):
-    assert cli.main(["demo", "--dim", "60", "--eps", "1", "0.1"]) == 0
-    text = capsys.readouterr().out
-    assert "closed forms match" in text and "recipe/budget" in text
-    assert "390625" in text  # paper recipe at eps = 1: k̄ = 8, 𝒩 = 5, N = 5^8
-
-
 def test_python_m_kinred_quantize(tmp_path):
     f = _write(tmp_path, UNIFORM3)
     r = subprocess.run([sys.executable, "-m", "kinred", "quantize", f, "--eps", "0.1"],

@@ -1,0 +1,51 @@
+"""Kinetic (mean-field) particle solutions, reduced solutions and Theorem 4.3 (§4 of the paper).
+
+The data flow of §4.3: a phase-space measure ``μ₀`` on ``ℝ²ᵈ`` is quantized into atoms
+(:func:`solve`, delayed-curse budget), the weighted particle system gives ``μᴺ(t)``; the
+projected atoms ``M#μ₀ᴺ`` start the reduced system in ``ℝ²ᵏ`` (:func:`reduce`), giving
+``νᴺ(t)``; :func:`compare` computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly and :func:`theorem_bound`
+the right-hand side of eq. (4.17) (label ``eq:approxkin``) with the constants of its proof.
+See docs/kinetic.md.
+"""
+
+from ._bounds import (
+    EffectConstants,
+    TheoremBound,
+    d_estimate,
+    effect_constants,
+    max_pairwise_distance,
+    stability_constant,
+    theorem_bound,
+)
+from ._compare import Comparison, ReferenceEstimate, compare, milling_index, reference_estimate
+from ._solution import (
+    KineticSolution,
+    ReducedSolution,
+    lift,
+    phase_space,
+    reduce,
+    solve,
+    weighted_scene,
+)
+
+__all__ = [
+    "solve",
+    "reduce",
+    "compare",
+    "reference_estimate",
+    "theorem_bound",
+    "phase_space",
+    "lift",
+    "weighted_scene",
+    "milling_index",
+    "effect_constants",
+    "d_estimate",
+    "stability_constant",
+    "max_pairwise_distance",
+    "KineticSolution",
+    "ReducedSolution",
+    "Comparison",
+    "ReferenceEstimate",
+    "TheoremBound",
+    "EffectConstants",
+]

@@ -1,0 +1,422 @@
+r"""The right-hand side of Theorem 4.3 (eq. (4.17), label ``eq:approxkin``) with the proof's constants.
+
+The proof of Theorem 4.3 splits
+
+.. math::
+    W_1(\mu_M(t), \nu(t)) \le
+    \underbrace{W_1(\mu_M(t), (\mu^N(t))_M)}_{\le\, C(t)\|M\|\varepsilon}
+    + \underbrace{W_1((\mu^N(t))_M, \nu^N(t))}_{\le\, \sqrt2\, D(t)\,\varepsilon_{JL}}
+    + \underbrace{W_1(\nu^N(t), \nu(t))}_{\le\, C(t)\|M\|\varepsilon}
+
+so kinred evaluates :math:`B(t) = 2C(t)\|M\|\varepsilon + \sqrt2\,D(t)\varepsilon_{JL}` with
+
+* ``ε`` -- the quantizer's bound ``W1(μ₀, μ₀ᴺ) ≤ ε`` (eq. (4.14), label ``epskin``);
+* ``ε_JL`` -- the distortion (3.4) (label ``Cont-JL``) of ``M`` measured along the particle
+  trajectories with :func:`kinred.projection.trajectory_distortion`, on the distances the
+  effects depend on (positions for kernels of ``‖xᵢ − xⱼ‖``, velocities for kernels of
+  ``‖vᵢ − vⱼ‖``, speeds ``‖vᵢ‖`` -- distances to the paper's auxiliary zero particle, §3.3.2 --
+  for self-propulsion): the Lipschitz conditions (1.2)–(1.4) only see those distances, so
+  (3.3) and (3.4) are only needed on them;
+* ``D(t) ε_JL`` -- Theorem 3.1's estimate, the RHS of eq. (3.7) (label ``eq:unifstab2``):
+
+  .. math:: D(t)\,\varepsilon_{JL} = \varepsilon_{JL}\,\alpha\, t\,(L\|M\| + L''\beta)
+            \exp\bigl[(2L\|M\| + 2\beta L'' + L')\,t\bigr],
+
+  applied to the ``2N`` variables ``x₁..x_N, v₁..v_N`` of ``ℝᵈ`` (the arrangement of §2.3),
+  so a particle's error in ``ℝ²ᵏ`` is at most ``√2·E(t)`` -- hence the factor ``√2``;
+* ``C(t)`` -- the W1 stability constant of eq. (4.6) (label ``stability``). kinred uses
+  Dobrushin's estimate (F. Golse, *On the dynamics of large particle systems in the mean
+  field limit*, 2016, Thm. 3.3; the paper's reference [CCR], §3–4): if the particle field
+  ``F(z, μ) = (v, H[μ](x, v))`` satisfies
+  ``|F(z, μ) − F(z′, μ′)| ≤ Λ_z |z − z′| + Λ_μ W1(μ, μ′)`` on the supports, then for two
+  measure solutions (in particular atomic ones, and their forward-Euler updates, since
+  ``(1 + hΛ)ⁿ ≤ e^{Λt}``)
+
+  .. math:: W_1(\mu(t), \mu'(t)) \le e^{\Lambda t}\, W_1(\mu(0), \mu'(0)), \qquad
+            \Lambda = \Lambda_z + \Lambda_\mu ,
+
+  by following the characteristics from an optimal coupling of the initial data. So
+  ``C(t) = exp(Λ t)``.
+
+A-priori quantities (``α`` of (3.3), ``β`` of (3.6), the speed bound ``β_v`` of §3.3.2, the
+support diameters used by ``Λ``) are *measured* on the simulated trajectories of both
+systems at the saved times, as running maxima over ``[0, t]`` (the theorem applied on
+``[0, t]``); positions are taken relative to the initial centroid (every supported effect is
+translation invariant, and ``y − Mx`` is unchanged by the shift). Between saved times nothing
+is checked: this is an a-posteriori evaluation, not a certificate.
+
+Per-effect constants (``S = Σⱼ cⱼ``, 1 for ``normalize="mean"``)
+---------------------------------------------------------------
+=====================  =========  ======================  ====================  ===============================
+effect                 L (1.2)    L′ (1.3), v-rows        L″ (1.4)              Λ_z + Λ_μ
+=====================  =========  ======================  ====================  ===============================
+pairwise φ (any)       0          2S‖φ‖∞                  2S‖φ‖_Lip             2S(‖φ‖∞ + ‖φ‖_Lip·diam(carrier))
+SelfPropulsion(a, b)   0          |a| + b β_v²            2 b β_v               max(|a|, |a − 3bβ_v²|)
+Drift(c)               0          0                       0                     0
+ẋ = v (x-rows)         0          1                       0                     1
+=====================  =========  ======================  ====================  ===============================
+
+``L′ = max(1, Σ v-row contributions)`` (the max over rows of (1.3)), ``L″`` is the sum. For
+Cucker–Smale this is the paper's ``L′ ≥ max(1, 2G)`` and ``L″ ≤ 2‖g‖_Lip`` (§2.3); for the
+self-propulsion model the paper's §3.3.2 values (with the max over rows instead of their sum).
+The pairwise Lipschitz bound: ``ψ(r, q) = φ(|r|) q`` with ``r`` the source difference and
+``q`` the carrier difference has ``|Δψ| ≤ ‖φ‖_Lip·|q|·|Δr| + ‖φ‖∞·|Δq|``, and
+``|q| ≤ diam(carrier)``; both the dependence on the particle (Λ_z) and on the measure (Λ_μ,
+through a coupling) have this constant. Self-propulsion ``h(v) = (a − b|v|²)v`` has Jacobian
+eigenvalues ``a − b|v|²`` and ``a − 3b|v|²``. Noise is not covered (the theorems are
+deterministic); kernels without ``sup_norm``/``lipschitz`` give ``inf``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_float
+from ..errors import InvalidInput
+
+__all__ = [
+    "EffectConstants",
+    "TheoremBound",
+    "effect_constants",
+    "d_estimate",
+    "stability_constant",
+    "theorem_bound",
+    "max_pairwise_distance",
+]
+
+
+@dataclass(frozen=True)
+class EffectConstants:
+    """Constants one effect contributes to (1.2)–(1.4) and to the stability rate Λ.
+
+    Attributes
+    ----------
+    effect : str
+    L : float
+        Contribution to ``L`` of (1.2) (label ``eq:condf1``).
+    Lp : float
+        Contribution to ``Σⱼ|fᵢⱼ|`` of a velocity row, (1.3) (label ``eq:condf2``).
+    Lpp : float
+        Contribution to ``L″`` of (1.4) (label ``eq:condf3``).
+    lip_state, lip_measure : float
+        Lipschitz constants of the velocity field in the particle state and in the measure
+        (W1), entering ``Λ = Λ_z + Λ_μ``.
+    sources : tuple of str
+        Distances the effect depends on: ``"x"``, ``"v"`` (pairwise), ``"speed"`` (``‖vᵢ‖``).
+    formula : str
+        How the numbers were obtained.
+    """
+
+    effect: str
+    L: float
+    Lp: float
+    Lpp: float
+    lip_state: float
+    lip_measure: float
+    sources: tuple
+    formula: str
+
+
+def _kernel_norms(kernel):
+    sup = getattr(kernel, "sup_norm", None)
+    lip = getattr(kernel, "lipschitz", None)
+    s = float(sup()) if callable(sup) else math.inf
+    l = float(lip()) if callable(lip) else math.inf
+    return s, l
+
+
+def effect_constants(effect, *, coef_sum: float = 1.0, speed: float = 0.0, diam_x: float = 0.0,
+                     diam_v: float = 0.0) -> EffectConstants:
+    r"""Constants of one effect (table in :mod:`kinred.kinetic._bounds`).
+
+    Parameters
+    ----------
+    effect : Effect
+    coef_sum : float
+        ``S = Σⱼ cⱼ`` of the scene's pairwise coefficients (1 for ``normalize="mean"``).
+    speed : float
+        ``β_v ≥ maxᵢ ‖vᵢ‖`` over both systems (self-propulsion).
+    diam_x, diam_v : float
+        Support diameters in positions and velocities (pairwise Lipschitz bounds).
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Alignment, CuckerSmale, SelfPropulsion
+    >>> c = effect_constants(Alignment(CuckerSmale(G=2.0, beta=0.0)), diam_v=3.0)
+    >>> c.Lp, c.Lpp, c.lip_state + c.lip_measure      # 2G, 2·0, 2·(G + 0·3)
+    (4.0, 0.0, 4.0)
+    >>> s = effect_constants(SelfPropulsion(1.0, 0.5), speed=2.0)
+    >>> s.Lp, s.Lpp, s.lip_state                      # 1 + 0.5·4, 2·0.5·2, |1 − 3·0.5·4|
+    (3.0, 2.0, 5.0)
+    """
+    from ..dynamics import Drift, Noise, SelfPropulsion
+
+    S = as_float(coef_sum, "coef_sum", low=0.0)
+    speed = as_float(speed, "speed", low=0.0)
+    diam_x = as_float(diam_x, "diam_x", low=0.0)
+    diam_v = as_float(diam_v, "diam_v", low=0.0)
+    name = repr(effect)
+    if getattr(effect, "stochastic", False) or isinstance(effect, Noise):
+        return EffectConstants(name, math.nan, math.nan, math.nan, math.nan, math.nan, (),
+                               "noise: not covered by Theorems 3.1/4.3 (deterministic dynamics)")
+    if getattr(effect, "pairwise", False):
+        if getattr(effect, "target", "v") != "v":
+            raise InvalidInput(f"{effect!r}: pairwise effects on positions (first-order) are not "
+                               "part of the second-order kinetic setting")
+        sup, lip = _kernel_norms(effect.kernel)
+        diam = diam_x if effect.carrier == "x" else diam_v
+        lipz = S * (sup + (lip * diam if lip > 0 else 0.0))
+        return EffectConstants(
+            name, 0.0, 2.0 * S * sup, 2.0 * S * lip, lipz, lipz, (effect.source,),
+            f"phi={effect.kernel!r}: ||phi||inf={sup:.6g}, ||phi||Lip={lip:.6g}, S={S:g}, "
+            f"diam({effect.carrier})={diam:.6g}; L'+=2S||phi||inf, L''+=2S||phi||Lip, "
+            f"Lip=S(||phi||inf+||phi||Lip*diam)")
+    if isinstance(effect, SelfPropulsion):
+        a, b = effect.a, effect.b
+        lz = max(abs(a), abs(a - 3.0 * b * speed ** 2))
+        return EffectConstants(
+            name, 0.0, abs(a) + b * speed ** 2, 2.0 * b * speed, lz, 0.0, ("speed",),
+            f"a={a:g}, b={b:g}, beta_v={speed:.6g}: L'+=|a|+b beta_v^2, L''+=2b beta_v, "
+            f"Lip=max(|a|,|a-3b beta_v^2|)")
+    if isinstance(effect, Drift):
+        return EffectConstants(name, 0.0, 0.0, 0.0, 0.0, 0.0, (), "constant f_i: all zero")
+    return EffectConstants(name, math.inf, math.inf, math.inf, math.inf, math.inf, (),
+                           "effect outside the documented table: constants unknown (inf)")
+
+
+def d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M):
+    r"""Theorem 3.1's estimate, the RHS of eq. (3.7) (label ``eq:unifstab2``).
+
+    .. math:: \mathcal E(t) \le \varepsilon\,\alpha\,t\,(L\|M\| + L''\beta)
+              \exp\bigl[(2L\|M\| + 2\beta L'' + L')\,t\bigr]
+
+    All arguments broadcast (arrays of times with running-max constants).
+
+    Examples
+    --------
+    >>> round(float(d_estimate(1.0, 0.1, 2.0, 3.0, 0.0, 1.0, 0.5, 1.0)), 10)   # 0.1·2·1·1.5·e^(3+1)
+    16.3794450099
+    """
+    t = np.asarray(t, float)
+    lin = L * norm_M + np.asarray(Lpp, float) * beta
+    with np.errstate(over="ignore", invalid="ignore"):
+        rate = 2.0 * L * norm_M + 2.0 * np.asarray(beta, float) * Lpp + Lp
+        out = np.asarray(eps_jl, float) * alpha * t * lin * np.exp(rate * t)
+    out = np.where(t == 0.0, 0.0, out)
+    return out if out.ndim else float(out)
+
+
+def stability_constant(t, Lambda):
+    r"""``C(t) = exp(Λ t)``: Dobrushin's W1 stability constant (eq. (4.6), label ``stability``).
+
+    Examples
+    --------
+    >>> stability_constant(0.0, 5.0), round(stability_constant(2.0, 0.5), 12)
+    (1.0, 2.718281828459)
+    """
+    with np.errstate(over="ignore"):
+        out = np.exp(np.asarray(Lambda, float) * np.asarray(t, float))
+    return out if np.ndim(out) else float(out)
+
+
+def max_pairwise_distance(Z) -> float:
+    """``max_{i,j} ‖zᵢ − zⱼ‖`` for ``Z (N, m)`` (centred Gram matrix, blocks of rows).
+
+    Examples
+    --------
+    >>> max_pairwise_distance(np.array([[0.0, 0.0], [3.0, 4.0], [1.0, 1.0]]))
+    5.0
+    """
+    Z = np.asarray(Z, float)
+    if Z.shape[0] < 2:
+        return 0.0
+    Z = Z - Z.mean(axis=0)
+    nn = np.einsum("ij,ij->i", Z, Z)
+    best = 0.0
+    b = max(1, int(4_000_000 // max(Z.shape[0], 1)))
+    for i0 in range(0, Z.shape[0], b):
+        G = Z[i0:i0 + b] @ Z.T
+        q = nn[i0:i0 + b, None] + nn[None, :] - 2.0 * G
+        best = max(best, float(q.max()))
+    return math.sqrt(max(best, 0.0))
+
+
+@dataclass(frozen=True)
+class TheoremBound:
+    r"""Theorem 4.3's bound at the saved times, with every piece.
+
+    Attributes
+    ----------
+    t : (T,) ndarray
+    eps : float
+        Quantization bound ``ε``.
+    norm_M : float
+        ``‖M‖`` (operator norm; also that of ``diag(M, M)``).
+    eps_jl, alpha, beta, speed, diam_x, diam_v : (T,) ndarray
+        Measured running maxima: distortion (3.4), (3.3), (3.6), ``β_v``, diameters.
+    L : float
+    Lp, Lpp, Lambda : (T,) ndarray
+        ``L′``, ``L″`` and the stability rate ``Λ`` (they depend on the running maxima).
+    C : (T,) ndarray
+        ``C(t) = exp(Λ t)``.
+    D_eps : (T,) ndarray
+        ``D(t) ε_JL``, the RHS of eq. (3.7): bounds ``maxᵢ ‖M zᵢ − ζᵢ‖`` over the ``2N``
+        variables.
+    term_quant : (T,) ndarray
+        ``2 C(t) ‖M‖ ε`` (first and third terms of the proof).
+    term_jl : (T,) ndarray
+        ``√2 D(t) ε_JL``: bounds ``W1(M#μᴺ(t), νᴺ(t))`` (second term).
+    bound : (T,) ndarray
+        ``term_quant + term_jl``: bounds ``W1(μ_M(t), ν(t))`` (the proof of Theorem 4.3).
+    bound_stated : (T,) ndarray
+        The statement's form ``𝒞(t)‖M‖ε̄`` with ``𝒞 = 2C‖M‖ + √2 D``, ``ε̄ = max(ε, ε_JL)``
+        (the statement carries one more factor ``‖M‖`` than the proof yields).
+    effects : tuple of EffectConstants
+        Per-effect constants at the final time.
+    covered : bool
+        False when an effect is outside the theorems (noise, unknown effects).
+    note : str
+    """
+
+    t: np.ndarray
+    eps: float
+    norm_M: float
+    eps_jl: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    speed: np.ndarray
+    diam_x: np.ndarray
+    diam_v: np.ndarray
+    L: float
+    Lp: np.ndarray
+    Lpp: np.ndarray
+    Lambda: np.ndarray
+    C: np.ndarray
+    D_eps: np.ndarray
+    term_quant: np.ndarray
+    term_jl: np.ndarray
+    bound: np.ndarray
+    bound_stated: np.ndarray
+    effects: tuple
+    covered: bool
+    note: str
+
+
+def _speed_distortion(P, V) -> np.ndarray:
+    """``maxᵢ |‖M vᵢ‖/‖vᵢ‖ − 1|`` per time for ``V (T, N, d)`` (zero vectors skipped)."""
+    out = np.zeros(V.shape[0])
+    for t in range(V.shape[0]):
+        n = np.linalg.norm(V[t], axis=1)
+        m = np.linalg.norm(P.apply(V[t]), axis=1)
+        ok = n > 0
+        if np.any(ok):
+            out[t] = float(np.max(np.abs(m[ok] / n[ok] - 1.0)))
+    return out
+
+
+def theorem_bound(solution, reduced, *, eps: float | None = None) -> TheoremBound:
+    r"""Evaluate the RHS of eq. (4.17) (label ``eq:approxkin``) with the proof's constants.
+
+    See the module documentation for every constant and where it comes from.
+
+    Parameters
+    ----------
+    solution : KineticSolution
+    reduced : ReducedSolution
+        Its reduced solution (same save times).
+    eps : float, optional
+        Quantization bound ``ε`` (default ``solution.eps``).
+
+    Returns
+    -------
+    TheoremBound
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Scene, Alignment, CuckerSmale
+    >>> from kinred.measures import Atomic
+    >>> from kinred.kinetic import solve, reduce
+    >>> mu0 = Atomic(np.random.default_rng(1).random((6, 8)))
+    >>> sc = Scene([Alignment(CuckerSmale(1.0, 0.0))])        # constant kernel: L'' = 0
+    >>> sol = solve(sc, mu0, t_span=(0, 1), dt=0.1, save_every=5)
+    >>> tb = theorem_bound(sol, reduce(sol, M=np.eye(2, 4)), eps=0.1)
+    >>> tb.term_jl                                             # D = 0: exact projection
+    array([0., 0., 0.])
+    """
+    from ..projection import trajectory_distortion
+    from ..dynamics import SelfPropulsion
+
+    P = reduced.projection
+    if not np.array_equal(solution.t, reduced.t):
+        raise InvalidInput("solution and reduced must share their save times")
+    eps = solution.eps if eps is None else as_float(eps, "eps", low=0.0)
+    norm_M = P.norm()
+    T = len(solution.t)
+    scene = solution.scene
+    w = solution.weights
+    c0 = w @ solution.x[0]
+    X = solution.x - c0[None, None, :] if scene.translation_invariant else solution.x
+    Y = reduced.y - P.apply(c0)[None, None, :] if scene.translation_invariant else reduced.y
+    V, W = solution.v, reduced.w
+    S = float(np.sum(scene.coefficients(len(w))))
+    sources = set()
+    for e in scene.effects:
+        if getattr(e, "pairwise", False):
+            sources.add(e.source)
+        if isinstance(e, SelfPropulsion):
+            sources.add("speed")
+    n = X.shape[1]
+    alpha_t = np.zeros(T)
+    eps_t = np.zeros(T)
+    if "x" in sources and n > 1:
+        alpha_t = np.maximum(alpha_t, [max_pairwise_distance(X[i]) for i in range(T)])
+        eps_t = np.maximum(eps_t, np.nan_to_num(trajectory_distortion(P, X).eps_t))
+    if "v" in sources and n > 1:
+        alpha_t = np.maximum(alpha_t, [max_pairwise_distance(V[i]) for i in range(T)])
+        eps_t = np.maximum(eps_t, np.nan_to_num(trajectory_distortion(P, V).eps_t))
+    if "speed" in sources:
+        alpha_t = np.maximum(alpha_t, np.linalg.norm(V, axis=2).max(axis=1))
+        eps_t = np.maximum(eps_t, _speed_distortion(P, V))
+    beta_t = np.maximum(np.linalg.norm(Y, axis=2).max(axis=1), np.linalg.norm(W, axis=2).max(axis=1))
+    speed_t = np.maximum(np.linalg.norm(V, axis=2).max(axis=1), np.linalg.norm(W, axis=2).max(axis=1))
+    dx_t = np.array([max(max_pairwise_distance(X[i]), max_pairwise_distance(Y[i])) for i in range(T)])
+    dv_t = np.array([max(max_pairwise_distance(V[i]), max_pairwise_distance(W[i])) for i in range(T)])
+    run = np.maximum.accumulate
+    alpha, eps_jl, beta, speed, diam_x, diam_v = (run(a) for a in (alpha_t, eps_t, beta_t, speed_t,
+                                                                   dx_t, dv_t))
+    Lp = np.empty(T)
+    Lpp = np.empty(T)
+    Lam = np.empty(T)
+    L = 0.0
+    consts = ()
+    covered = True
+    for i in range(T):
+        consts = tuple(effect_constants(e, coef_sum=S, speed=float(speed[i]), diam_x=float(diam_x[i]),
+                                        diam_v=float(diam_v[i])) for e in scene.effects)
+        L = float(sum(c.L for c in consts))
+        Lp[i] = max(1.0, float(sum(c.Lp for c in consts)))
+        Lpp[i] = float(sum(c.Lpp for c in consts))
+        Lam[i] = 1.0 + float(sum(c.lip_state + c.lip_measure for c in consts))
+    if any(not np.isfinite(c.Lp) for c in consts):
+        covered = False
+    t = np.asarray(solution.t, float) - float(solution.t[0])
+    D_eps = np.atleast_1d(d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M))
+    C = np.atleast_1d(stability_constant(t, Lam))
+    with np.errstate(over="ignore", invalid="ignore"):
+        term_quant = 2.0 * C * norm_M * eps
+        term_jl = math.sqrt(2.0) * D_eps
+        bound = term_quant + term_jl
+        bound_stated = (2.0 * C * norm_M + math.sqrt(2.0) * D_eps / np.where(eps_jl > 0, eps_jl, 1.0)) \
+            * norm_M * np.maximum(eps, eps_jl)
+    note = ("bound = 2 C(t) ||M|| eps + sqrt(2) D(t) eps_JL (proof of Theorem 4.3); constants "
+            "measured at saved times as running maxima")
+    if not covered:
+        note += "; some effect is outside Theorems 3.1/4.3 (noise or unknown): bound is nan/inf"
+    return TheoremBound(t=np.asarray(solution.t, float), eps=float(eps), norm_M=norm_M,
+                        eps_jl=eps_jl, alpha=alpha, beta=beta, speed=speed, diam_x=diam_x,
+                        diam_v=diam_v, L=L, Lp=Lp, Lpp=Lpp, Lambda=Lam, C=C, D_eps=D_eps,
+                        term_quant=term_quant, term_jl=term_jl, bound=bound,
+                        bound_stated=bound_stated, effects=consts, covered=covered, note=note)

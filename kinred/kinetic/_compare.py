@@ -1,0 +1,186 @@
+r"""W1 between the projected and the reduced particle solutions, and reference estimates.
+
+What is exact and what is an estimate
+-------------------------------------
+* :func:`compare` -- ``W1(M#μᴺ(t), νᴺ(t))`` on ``ℝ²ᵏ``: **exact** (POT's network simplex on
+  the two atomic measures, :func:`kinred.distance.w1`; ``exact`` says so per time), with the
+  index coupling ``Σᵢ wᵢ ‖(Mxᵢ, Mvᵢ) − (yᵢ, wᵢ)‖`` (an upper bound, the one the proof of
+  Theorem 4.3 uses) and the uniform error ``E(t) = max`` over the ``2N`` variables of
+  Theorem 3.1 (eq. (3.7), label ``eq:unifstab2``).
+* :func:`reference_estimate` -- with a finer reference (more atoms ``N′``),
+  ``W1(M#μᴺ′(t), νᴺ′(t))`` (exact for the reference atoms) is an **estimate** of the
+  continuum ``W1(μ_M(t), ν(t))``, off by at most ``W1(μ_M, M#μᴺ′) + W1(ν, νᴺ′)`` (unknown;
+  ``≤ 2C(t)‖M‖ε′`` by the theorem's terms). ``W1(μᴺ(t), μᴺ′(t))`` on ``ℝ²ᵈ`` (exact between
+  the two atomic measures) checks the stability estimate (4.6) against ``C(t)·W1`` at 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InvalidInput
+from ._solution import KineticSolution, ReducedSolution
+
+__all__ = ["Comparison", "ReferenceEstimate", "compare", "reference_estimate", "milling_index"]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """``W1(M#μᴺ(t), νᴺ(t))`` over time.
+
+    Attributes
+    ----------
+    t : (T,) ndarray
+    w1 : (T,) ndarray
+        W1 on ``ℝ²ᵏ`` (Euclidean ground metric) between ``M#μᴺ(t)`` and ``νᴺ(t)``.
+    exact : (T,) bool ndarray
+        Whether each value is exact (POT) or the midpoint of a certified bracket.
+    lower, upper : (T,) ndarray
+        Certified bracket (equal to ``w1`` when exact).
+    coupling : (T,) ndarray
+        ``Σᵢ wᵢ ‖(Mxᵢ − yᵢ, Mvᵢ − wᵢ)‖ ≥ W1`` (the index coupling).
+    uniform : (T,) ndarray
+        ``E(t) = maxᵢ max(‖Mxᵢ − yᵢ‖, ‖Mvᵢ − wᵢ‖)`` (Theorem 3.1).
+    method : str
+        W1 method used (``"exact"``, ``"exact-lazy"`` or ``"bracket"``).
+    k : int
+    """
+
+    t: np.ndarray
+    w1: np.ndarray
+    exact: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    coupling: np.ndarray
+    uniform: np.ndarray
+    method: str
+    k: int
+
+
+def _w1_atoms(A, B, wa, wb):
+    from ..distance import w1
+
+    return w1(A, B, method="auto", a=wa, b=wb)
+
+
+def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:
+    r"""``W1(M#μᴺ(t), νᴺ(t))`` at every saved time (exact, POT).
+
+    .. math:: W_1\bigl((\mu^N(t))_M, \nu^N(t)\bigr) \le \sum_i w_i
+              \bigl\|(Mx_i(t) - y_i(t),\, Mv_i(t) - w_i(t))\bigr\|
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Scene, Alignment, CuckerSmale
+    >>> from kinred.measures import Atomic
+    >>> from kinred.kinetic import solve, reduce
+    >>> mu0 = Atomic(np.random.default_rng(0).random((8, 6)))
+    >>> sol = solve(Scene([Alignment(CuckerSmale(1.0, 0.0))]), mu0, t_span=(0, 1), dt=0.1)
+    >>> c = compare(sol, reduce(sol, M=np.eye(2, 3)))
+    >>> bool(c.w1.max() < 1e-12), bool(c.exact.all())
+    (True, True)
+    """
+    if not isinstance(solution, KineticSolution) or not isinstance(reduced, ReducedSolution):
+        raise InvalidInput("compare needs a KineticSolution and its ReducedSolution")
+    if not np.array_equal(solution.t, reduced.t) or solution.x.shape[1] != reduced.y.shape[1]:
+        raise InvalidInput("solution and reduced must share save times and atoms (use reduce(solution, ...))")
+    P = reduced.projection
+    T = len(solution.t)
+    w = solution.weights
+    vals, ex, lo, hi, cpl, uni = (np.empty(T) for _ in range(6))
+    ex = np.zeros(T, bool)
+    method = ""
+    for i in range(T):
+        Mx, Mv = P.apply(solution.x[i]), P.apply(solution.v[i])
+        A = np.concatenate([Mx, Mv], axis=1)
+        B = np.concatenate([reduced.y[i], reduced.w[i]], axis=1)
+        r = _w1_atoms(A, B, w, reduced.weights)
+        vals[i], ex[i], lo[i], hi[i] = r.value, r.exact, r.lower, r.upper
+        method = r.method
+        ex_ = np.linalg.norm(Mx - reduced.y[i], axis=1)
+        ev_ = np.linalg.norm(Mv - reduced.w[i], axis=1)
+        cpl[i] = float(w @ np.sqrt(ex_ ** 2 + ev_ ** 2))
+        uni[i] = float(max(ex_.max(), ev_.max()))
+    return Comparison(t=np.asarray(solution.t, float), w1=vals, exact=ex, lower=lo, upper=hi,
+                      coupling=cpl, uniform=uni, method=method, k=P.k)
+
+
+@dataclass(frozen=True)
+class ReferenceEstimate:
+    """Estimates against a finer reference solution (``N′`` atoms).
+
+    Attributes
+    ----------
+    t : (T,) ndarray
+    w1_reference : (T,) ndarray
+        ``W1(M#μᴺ′(t), νᴺ′(t))`` (exact for the reference atoms): an **estimate** of
+        ``W1(μ_M(t), ν(t))``.
+    w1_quantization : (T,) ndarray
+        ``W1(μᴺ(t), μᴺ′(t))`` on ``ℝ²ᵈ`` (exact): how the two quantizations separate.
+    n_atoms, n_atoms_reference : int
+    eps_reference : float
+        Quantization bound of the reference.
+    exact : bool
+        Whether every W1 above was computed exactly.
+    """
+
+    t: np.ndarray
+    w1_reference: np.ndarray
+    w1_quantization: np.ndarray
+    n_atoms: int
+    n_atoms_reference: int
+    eps_reference: float
+    exact: bool
+
+
+def reference_estimate(solution: KineticSolution, reference: KineticSolution,
+                       reference_reduced: ReducedSolution) -> ReferenceEstimate:
+    """Estimate ``W1(μ_M(t), ν(t))`` by a finer reference, and ``W1(μᴺ(t), μᴺ′(t))``.
+
+    ``reference`` must be saved at the same times as ``solution``.
+    """
+    if not np.allclose(solution.t, reference.t):
+        raise InvalidInput("solution and reference must share their save times")
+    c = compare(reference, reference_reduced)
+    T = len(solution.t)
+    q = np.empty(T)
+    exact = bool(c.exact.all())
+    for i in range(T):
+        r = _w1_atoms(np.concatenate([solution.x[i], solution.v[i]], axis=1),
+                      np.concatenate([reference.x[i], reference.v[i]], axis=1),
+                      solution.weights, reference.weights)
+        q[i] = r.value
+        exact &= bool(r.exact)
+    return ReferenceEstimate(t=np.asarray(solution.t, float), w1_reference=c.w1, w1_quantization=q,
+                             n_atoms=solution.n_atoms, n_atoms_reference=reference.n_atoms,
+                             eps_reference=reference.eps, exact=exact)
+
+
+def milling_index(x, v, weights=None) -> float:
+    r"""Normalized angular momentum: ``≈ 1`` for a mill, ``≈ 0`` for a translating flock.
+
+    .. math:: m = \frac{\bigl\|\sum_i w_i\, r_i \wedge v_i\bigr\|}{\sum_i w_i \|r_i\|\,\|v_i\|},
+              \qquad r_i = x_i - \sum_j w_j x_j,
+
+    with ``‖r ∧ v‖² = ‖r‖²‖v‖² − (r·v)²`` (in ``d = 2`` the usual angular momentum; valid in
+    any dimension, so a rotated mill in ``ℝ²⁰⁰`` has the same index).
+
+    Examples
+    --------
+    >>> th = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    >>> x = np.c_[np.cos(th), np.sin(th)]; v = np.c_[-np.sin(th), np.cos(th)]
+    >>> round(milling_index(x, v), 12), round(milling_index(x, np.ones_like(x)), 12)
+    (1.0, 0.0)
+    """
+    x = np.asarray(x, float)
+    v = np.asarray(v, float)
+    n = x.shape[0]
+    w = np.full(n, 1.0 / n) if weights is None else np.asarray(weights, float)
+    r = x - w @ x
+    A = (r * w[:, None]).T @ v
+    W = A - A.T
+    num = np.sqrt(0.5 * np.sum(W * W))
+    den = float(w @ (np.linalg.norm(r, axis=1) * np.linalg.norm(v, axis=1)))
+    return float(num / den) if den > 0 else 0.0

@@ -1,0 +1,46 @@
+"""``kinred demo`` (the main job) at smoke size, and its built-in configuration."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+import kinred.cli as cli
+from kinred.experiments import demo
+from kinred.quantize import quantize
+from kinred.report import validate_report_html
+
+
+def test_demo_smoke_through_cli(tmp_path, capsys):
+    assert "kinred.commands.demo" in cli.COMMAND_MODULES
+    out = tmp_path / "demo"
+    assert cli.main(["demo", "--smoke", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.strip().splitlines()[-1] == f"report: {out / 'report.html'}"
+    assert "k=2" in text and "k=5" in text and "verdict" in text
+    assert validate_report_html((out / "report.html").read_text()) == 4
+    s = json.loads((out / "summary.json").read_text())
+    assert s["ks"] == [2, 5] and s["high"]["verdict"] in ("pos", "neg", "n/a")
+    for r in s["per_k"].values():
+        assert r["all_exact"] and r["under_term_jl"] and r["under_bound"]
+    # running it again replaces the previous demo (no --resume needed)
+    assert cli.main(["demo", "--smoke", "--out", str(out)]) == 0
+    s2 = json.loads((out / "summary.json").read_text())
+    assert set(s2["stages"].values()) == {"computed"}
+    assert np.isclose(s2["per_k"]["2"]["w1_final"], s["per_k"]["2"]["w1_final"], rtol=0, atol=0)
+
+
+def test_demo_defaults_are_high_dimensional_and_budgeted():
+    cfg = demo.scene_config()
+    assert cfg.d == 100 and cfg.ks == (2, 5, 10, 25) and cfg.reference_atoms > cfg.atoms
+    q = quantize(cfg.initial_measure(), atoms=cfg.atoms)
+    assert q.n_atoms <= cfg.atoms and q.k_bar < 20          # the delayed curse: few coordinates
+    assert cfg.scene().normalize == "mean"
+
+
+def test_python_m_kinred_demo_subprocess(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "kinred", "demo", "--smoke", "--out",
+                        str(tmp_path / "d")], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip().endswith("report.html")

@@ -1,0 +1,175 @@
+"""``kinred run``: shipped scenes in smoke mode, malformed scene files, interrupt and resume."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kinred.cli as cli
+from kinred.errors import ConfigError
+from kinred.experiments import kinetic_run
+from kinred.report import validate_report_html
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = sorted((ROOT / "examples" / "scenes").glob("*.toml"))
+REGISTERED = "kinred.commands.run" in cli.COMMAND_MODULES   # before any monkeypatching
+
+
+@pytest.fixture
+def main(monkeypatch):
+    if "kinred.commands.run" not in cli.COMMAND_MODULES:
+        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.run",))
+    return cli.main
+
+
+def test_four_scenes_are_shipped():
+    names = {p.stem for p in SCENES}
+    assert {"cucker-smale-200", "dorsogna-mill-2d", "dorsogna-mill-lift-200", "delayed-curse"} <= names
+
+
+@pytest.mark.parametrize("scene", SCENES, ids=lambda p: p.stem)
+def test_shipped_scene_smoke(scene, tmp_path, main, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out), "--smoke"]) == 0
+    printed = capsys.readouterr().out
+    assert f"report: {out / 'report.html'}" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["smoke"] is True
+    assert set(summary["stages"].values()) == {"computed"}
+    for k, r in summary["per_k"].items():
+        assert r["all_exact"]
+        assert r["under_bound"] and r["under_term_jl"], (scene.stem, k, r)
+    html = (out / "report.html").read_text()
+    assert validate_report_html(html) == 4            # every figure embedded and non-empty
+    for name in ("w1_vs_time.png", "bound.png", "observables.png", "positions_final.png"):
+        assert (out / name).read_bytes().startswith(b"\x89PNG")
+    res = np.load(out / "results.npz")
+    k0 = summary["ks"][0]
+    assert res[f"k{k0}_w1"][0] < 1e-12                # W1(M#μᴺ(0), νᴺ(0)) = 0
+    # the full-size configuration of every shipped scene is valid too
+    cfg = kinetic_run.load_config(scene)
+    assert not cfg.smoke and cfg.d >= 2
+
+
+def test_delayed_curse_scene_uses_few_coordinates():
+    cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "delayed-curse.toml")
+    from kinred.quantize import quantize
+
+    q = quantize(cfg.initial_measure(), eps=cfg.eps)
+    assert q.k_bar <= 6 < 2 * cfg.d and q.bound <= cfg.eps * (1 + 1e-12)
+
+
+def test_mill_scene_mills():
+    # the 2-D mill scene at reduced size still forms one mill (normalized angular momentum)
+    cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "dorsogna-mill-2d.toml")
+    from kinred.kinetic import milling_index, solve
+
+    sol = solve(cfg.scene(), cfg.initial_measure(), atoms=64, t_span=(0.0, 10.0), dt=0.05,
+                save_every=200)
+    assert milling_index(sol.x[-1], sol.v[-1], sol.weights) > 0.9
+
+
+BASE = """
+[dynamics]
+d = 2
+[[dynamics.effect]]
+type = "alignment"
+G = 1.0
+beta = 0.5
+[initial.positions]
+[[initial.positions.coordinate]]
+dist = "uniform"
+repeat = 2
+[initial.velocities]
+[[initial.velocities.coordinate]]
+dist = "uniform"
+repeat = 2
+[quantize]
+atoms = 9
+[projection]
+k = [1]
+[integrate]
+dt = 0.1
+t_final = 0.5
+"""
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda s: s.replace("[quantize]\n", "[quantize]\ncolour = 1\n"), "quantize.colour"),
+    (lambda s: s.replace("dt = 0.1\n", ""), "integrate.dt"),
+    (lambda s: s.replace("t_final = 0.5", 't_final = "long"'), "integrate.t_final"),
+    (lambda s: s.replace("G = 1.0\n", ""), "dynamics.effect[0].G"),
+    (lambda s: s.replace("k = [1]", "k = [7]"), "projection.k"),
+    (lambda s: s.replace('dist = "uniform"\nrepeat = 2\n[initial.velocities]',
+                         'dist = "nope"\nrepeat = 2\n[initial.velocities]'), "initial.positions"),
+])
+def test_malformed_scene_one_line(edit, key, tmp_path, main, capsys):
+    good = tmp_path / "good.toml"
+    good.write_text(BASE)
+    assert main(["run", str(good), "--out", str(tmp_path / "g")]) == 0
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edit(BASE))
+    capsys.readouterr()
+    assert main(["run", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "ConfigError" in err and str(bad) in err and key in err
+
+
+def test_config_errors_directly():
+    with pytest.raises(ConfigError, match="quantize.eps: give exactly one"):
+        kinetic_run.config_from_dict({**kinetic_run.SMALL_SCENE, "quantize": {}})
+    with pytest.raises(ConfigError, match="not found"):
+        kinetic_run.load_config("/nonexistent/scene.toml")
+
+
+def _cli_cmd(args):
+    if REGISTERED:
+        return [sys.executable, "-m", "kinred", *args]
+    code = ("import sys, kinred.cli as c; c.COMMAND_MODULES += ('kinred.commands.run',); "
+            f"sys.exit(c.main({list(args)!r}))")
+    return [sys.executable, "-c", code]
+
+
+def test_interrupt_and_resume(tmp_path, main, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE.replace("k = [1]", "k = [1, 2]").replace("atoms = 9", "atoms = 9\nreference_atoms = 16"))
+    out = tmp_path / "out"
+    env = dict(os.environ, **{kinetic_run.STAGE_HOOK_ENV: "2:kill"})
+    p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(out)]), env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == -signal.SIGKILL, p.stderr
+    done = sorted(x.name for x in (out / "stages").iterdir())
+    assert done == ["config.json", "reference.npz", "solve.npz"]
+    assert not (out / "summary.json").exists()
+    before = {n: (out / "stages" / n).stat().st_mtime_ns for n in ("solve.npz", "reference.npz")}
+    content = {n: (out / "stages" / n).read_bytes() for n in before}
+    # without --resume the folder is refused
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stages"] == {"solve": "loaded", "reference": "loaded", "k1": "computed",
+                                 "k2": "computed"}
+    for n, m in before.items():
+        assert (out / "stages" / n).stat().st_mtime_ns == m
+        assert (out / "stages" / n).read_bytes() == content[n]
+    validate_report_html((out / "report.html").read_text())
+    # a changed configuration is not resumed into the same folder
+    scene.write_text(scene.read_text().replace("t_final = 0.5", "t_final = 0.6"))
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 2
+    assert "different configuration" in capsys.readouterr().err
+
+
+def test_python_m_kinred_run_subprocess(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(tmp_path / "o")]),
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert "report:" in p.stdout and p.stderr == ""    # no progress bar when not a TTY
