@@ -28,6 +28,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "kinred.commands.quantize",
     "kinred.commands.run",
     "kinred.commands.paper",
+    "kinred.commands.cost",
 )
 
 

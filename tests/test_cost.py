@@ -1,0 +1,157 @@
+"""Tests of the cost study (``kinred cost``): numbers checked against closed forms and theory."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+import numpy as np
+import pytest
+
+from kinred.errors import InvalidInput
+from kinred.experiments.cost import CostConfig, pareto_front, run, time_to_reach
+from kinred.io import ResultFolder
+from kinred.report import validate_report_html
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cost-smoke")
+    result = run(CostConfig.smoke(), out_dir=out, progress=False)
+    return result, ResultFolder(out)
+
+
+def _slope(x, y):
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+def test_result_folder_complete(smoke):
+    result, folder = smoke
+    assert folder.is_complete
+    names = folder.list()
+    for study in ("projection", "recovery", "quantization", "integrators", "w1"):
+        assert f"cost_{study}.png" in names
+        assert folder.read_bytes(f"cost_{study}.png").startswith(b"\x89PNG")
+    assert validate_report_html(folder.read_text("report.html")) == 5
+    data = folder.read_json("cost.json")
+    assert set(data["headline"]) == {"projection", "recovery", "quantization", "integrators", "w1"}
+    assert data["machine"]["cores"] >= 1 and data["wall_time_s"] > 0
+    summary = folder.read_json("summary.json")
+    assert summary["study"] == "cost" and summary["headline"]["quantization"].startswith("the delayed")
+    # summary.json is written last
+    mtimes = {n: (folder / n).stat().st_mtime_ns for n in names}
+    assert mtimes["summary.json"] == max(mtimes.values())
+
+
+def test_projection_error_decreases_with_k(smoke):
+    result, _ = smoke
+    p = result.studies["projection"]
+    for kind in ("gaussian", "srht"):
+        rs = sorted((r for r in p["summary"] if r["kind"] == kind), key=lambda r: r["k"])
+        errs = [r["error_final"] for r in rs]
+        assert errs[0] > errs[-1] > 0
+        # JL scaling: error ~ k^(-1/2); from k = 2 to k = 30 at least a factor 2
+        assert errs[0] / errs[-1] > 2.0
+        for r in rs:
+            assert r["error_max"] >= r["error_final"] - 1e-15
+            assert 0.0 <= r["verdict_agreement"] <= 1.0 and r["time_s"] > 0
+
+
+def test_recovery_improves_with_L(smoke):
+    result, _ = smoke
+    rows = result.studies["recovery"]["rows"]
+    for tol in {r["tol"] for r in rows}:
+        rs = sorted((r for r in rows if r["tol"] == tol), key=lambda r: r["L"])
+        assert rs[-1]["error"] < 0.5 * rs[0]["error"]
+        # one projection into R^10 of a vector with ~12 nonzeros in R^60 cannot recover it
+        assert rs[0]["error"] > 0.3
+        assert all(r["time_s"] >= r["solve_s"] > 0 for r in rs)
+
+
+def test_quantization_closed_forms(smoke):
+    result, _ = smoke
+    q = result.studies["quantization"]
+    d, rho = q["setting"]["d"], q["setting"]["rho"]
+    widths = {"isotropic": np.ones(d), "decaying": rho ** np.arange(d)}
+    for name, rows in q["rows"].items():
+        for r in rows:
+            # midpoint quantization of U[0, s] with n atoms: W1 = s/(4n); product-l1 sums them
+            expect = float(np.sum(widths[name] / (4.0 * np.asarray(r["counts"]))))
+            assert r["product_l1"] == pytest.approx(expect, rel=1e-9)
+            assert r["n_atoms"] == int(np.prod(r["counts"])) <= r["atoms_budget"]
+            if "euclidean_to_fine" in r:
+                # triangle inequality + |.|_2 <= |.|_1: W1(coarse, fine) <= pl1(coarse) + pl1(fine)
+                fine_n = round(q["setting"]["fine_atoms"] ** (1.0 / d))
+                fine_err = float(np.sum(widths[name])) / (4.0 * fine_n) if name == "isotropic" else 1.0
+                assert 0.0 < r["euclidean_to_fine"] <= r["product_l1"] + fine_err + 1e-12
+    iso = [r for r in q["rows"]["isotropic"] if r["n_atoms"] > 1]
+    # the curse: error ∝ N^(-1/d) on the isotropic grid
+    assert _slope([r["n_atoms"] for r in iso], [r["product_l1"] for r in iso]) == pytest.approx(-1.0 / d, abs=1e-9)
+    a = q["atoms_for_eps"]
+    assert int(a["decaying"]) < int(a["isotropic"])
+
+
+def test_integrator_orders(smoke):
+    result, _ = smoke
+    rows = result.studies["integrators"]["rows"]
+    for method, order in (("euler", 1), ("heun", 2), ("rk4", 4)):
+        rs = sorted((r for r in rows if r["method"] == method), key=lambda r: r["steps"])
+        errs = [r["error"] for r in rs]
+        assert all(a > b for a, b in zip(errs, errs[1:]))
+        assert -_slope([r["steps"] for r in rs], errs) == pytest.approx(order, abs=0.35)
+    for method in ("rk45", "rk23"):
+        rs = sorted((r for r in rows if r["method"] == method), key=lambda r: -r["rtol"])
+        assert rs[-1]["error"] < rs[0]["error"]
+        assert rs[-1]["error"] < 100 * rs[-1]["rtol"]
+
+
+def test_w1_methods_agree(smoke):
+    result, _ = smoke
+    rows = result.studies["w1"]["rows"]
+    for n in {r["N"] for r in rows}:
+        by = {r["method"]: r for r in rows if r["N"] == n}
+        W = by["exact"]["value"]
+        assert by["exact-lazy"]["value"] == pytest.approx(W, rel=1e-9)
+        b = by["bracket"]
+        assert b["lower"] <= W * (1 + 1e-9) and W <= b["upper"] * (1 + 1e-9)
+
+
+def test_pareto_and_time_to_reach():
+    t = [3.0, 1.0, 2.0, 4.0]
+    e = [0.01, 0.5, 0.02, 0.05]
+    assert pareto_front(t, e).tolist() == [1, 2, 0]
+    assert pareto_front([1.0, 2.0], [np.nan, 1.0]).tolist() == [1]
+    assert time_to_reach(t, e, 0.03) == 2.0
+    assert time_to_reach(t, e, 1e-3) is None
+
+
+def test_config_validation():
+    with pytest.raises(InvalidInput, match="rec_Ls"):
+        CostConfig.smoke(rec_Ls=(1, 6))
+    with pytest.raises(InvalidInput, match="studies"):
+        CostConfig.smoke(studies=("nope",))
+    with pytest.raises(InvalidInput, match="proj_steps"):
+        CostConfig.smoke(proj_steps=55)
+    with pytest.raises(InvalidInput, match="cfg"):
+        run({"quick": True}, progress=False)
+
+
+def test_cli_smoke(tmp_path, capsys):
+    cmd = importlib.import_module("kinred.commands.cost")
+    from kinred import cli
+
+    argv = ["cost", "--smoke", "--only", "quantization", "w1", "--no-progress",
+            "--out", str(tmp_path / "c")]
+    if "kinred.commands.cost" in cli.COMMAND_MODULES:
+        code = cli.main(argv)
+    else:
+        parser = argparse.ArgumentParser()
+        cmd.add_arguments(parser)
+        code = cmd.run(parser.parse_args(argv[1:]))
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "delayed-curse budget" in out and "exact-lazy" in out
+    folder = ResultFolder(tmp_path / "c")
+    assert folder.is_complete
+    assert sorted(n for n in folder.list() if n.endswith(".png")) == ["cost_quantization.png", "cost_w1.png"]
+    assert validate_report_html(folder.read_text("report.html")) == 2
