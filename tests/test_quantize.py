@@ -344,3 +344,21 @@ def test_quantize_validation():
         quantize(Mixture([Uniform(), Uniform(1, 2), Uniform(3, 4)]), atoms=2)
     with pytest.raises(InvalidInput, match="1-D"):
         quantize_1d(TensorProduct([Uniform(), Uniform()]), 3)
+
+
+def test_isotropic_curse_beyond_float_range():
+    """200 unit widths at eps = 1 need 100 atoms per coordinate: N = 100**200 = 1e400 (the curse).
+
+    The count is exact, the relaxation's lower bound overflows to inf instead of raising, and
+    the repr stays short.
+    """
+    from kinred.measures import TensorProduct, Uniform
+    from kinred.quantize import budget, quantize
+
+    b = budget([1.0] * 200, eps=1.0)
+    assert b.counts == (100,) * 200
+    assert b.n_atoms == 100**200 and b.optimal
+    assert b.recipe.n_atoms > b.n_atoms
+    q = quantize(TensorProduct([Uniform(0.0, 1.0)] * 200), eps=1.0)
+    assert q.n_atoms == 100**200
+    assert "n_atoms=1.000e+400" in repr(q) and len(repr(q)) < 200

@@ -437,7 +437,8 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
             cand = sorted(cand, reverse=True)  # some optimum is non-increasing along s
             N, optimal = solver.solve_eps(eps, cand)
             nodes = solver.nodes
-            lower = math.exp(logLB)
+            # the relaxation's optimum can exceed the float range (the curse: N ~ 1e400)
+            lower = math.exp(logLB) if logLB < 709.0 else math.inf
     else:
         atoms = as_int(atoms, "atoms", low=1)
         if s.size == 0:

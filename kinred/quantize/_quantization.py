@@ -155,6 +155,16 @@ class Quantization:
     n_atoms: int
     bound: float
 
+    def __repr__(self) -> str:
+        n = self.n_atoms
+        if n < 10**12:
+            count = str(n)
+        else:  # exact ints beyond the float range: mantissa and exponent from the digits
+            digits = str(n)
+            count = f"{digits[0]}.{digits[1:4]}e+{len(digits) - 1}"
+        return (f"{type(self).__name__}(dim={self.dim}, n_atoms={count}, bound={self.bound:.6g}, "
+                f"rule={self.rule!r}, error_kind={self.error_kind!r})")
+
     def _block(self, start: int, count: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
         raise NotImplementedError
 
@@ -205,7 +215,7 @@ class Quantization:
         return Atomic(pts, w / w.sum())
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Quantization1D(Quantization):
     """Equal-weight atoms at quantile levels of a 1-D measure (eqs. (4.20)–(4.21) of the paper).
 
@@ -250,7 +260,7 @@ class Quantization1D(Quantization):
         return self.points[start:start + count, None].copy(), self.weights[start:start + count].copy()
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class AtomicQuantization(Quantization):
     """An atomic measure is its own quantization (exact, error 0)."""
 
@@ -282,7 +292,7 @@ class AtomicQuantization(Quantization):
         return self.measure.points[start:start + count].copy(), self.measure.weights[start:start + count].copy()
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class TensorQuantization(Quantization):
     """Grid of per-coordinate quantizations: Lemma 4.1 of the paper (label ``lem:W:tensors``).
 
@@ -353,7 +363,7 @@ class TensorQuantization(Quantization):
         return pts, w
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class MixtureQuantization(Quantization):
     """Union of per-component quantizations, weights ``wₗ·(component weights)``.
 
@@ -407,7 +417,7 @@ class MixtureQuantization(Quantization):
         return np.concatenate(pts), np.concatenate(ws)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class PushQuantization(Quantization):
     """Quantization of ``M#μ``: atoms of ``μ`` pushed by ``M`` (eq. (4.9), label ``projatom``).
 
