@@ -68,7 +68,7 @@ class DemoConfig:
 
 
 def scene_config(cfg: DemoConfig | None = None) -> kinetic_run.Config:
-    """The :class:`kinetic_run.Config` of the demo with ``cfg``'s overrides applied."""
+    """The :class:`kinred.experiments.kinetic_run.Config` of the demo with ``cfg``'s overrides applied."""
     cfg = cfg or DemoConfig()
     scene = copy.deepcopy(DEMO_SCENE)
     if cfg.d is not None:

@@ -1,0 +1,67 @@
+"""`kinred paper fig4 --quick`: the qualitative facts of the paper's Figure 4 (§3.4.2)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from kinred.cli import main
+from kinred.errors import InvalidInput
+from kinred.experiments.fig4 import Fig4Config, _relative
+from kinred.report import validate_report_html
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fig4")
+    assert main(["paper", "fig4", "--quick", "--out", str(out)]) == 0
+    return out, json.loads((out / "fig4.json").read_text())
+
+
+def test_projection_error_grows_as_k_falls_and_far_below_exponential(quick):
+    _, res = quick
+    t = np.array(res["t"])
+    errs = {int(k): np.array(v) for k, v in res["projection_error"].items()}
+    ks = sorted(errs)
+    assert all(errs[k][0] < 1e-12 for k in ks)          # y(0) = M x(0) exactly
+    # smaller k, larger error, at every saved time after the start
+    for a, b in zip(ks, ks[1:]):
+        assert np.all(errs[a][1:] > errs[b][1:]), (a, b)
+    # "far below exponential growth": the error grows sublinearly (concave in t), unlike the
+    # t exp(At) of Theorem 3.1 -- the increments over equal time steps shrink.
+    for k in ks:
+        inc = np.diff(errs[k][1:])
+        assert np.all(inc[1:] <= inc[:-1] * (1 + 1e-9)), k
+        assert errs[k][-1] < 2 * errs[k][len(t) // 2], k
+    assert errs[ks[0]].max() < 0.15  # the paper: ~14 % at its smallest k
+
+
+def test_recovery_error_decreases_as_L_grows(quick):
+    _, res = quick
+    errs = {int(L): np.array(v) for L, v in res["recovery_error"].items()}
+    Ls = sorted(errs)
+    means = [errs[L].mean() for L in Ls]
+    assert all(a > b for a, b in zip(means, means[1:])), dict(zip(Ls, means))
+    assert errs[Ls[-1]][0] < 1e-6  # enough rows: the sparse initial velocities are recovered exactly
+    assert res["eta"] == 0.0 and res["coupling"] == "normalize='mean', G=1.0"
+
+
+def test_fig4_report(quick):
+    out, _ = quick
+    assert validate_report_html((out / "report.html").read_text()) == 1
+    assert (out / "summary.json").exists()
+
+
+def test_relative_error_formula():
+    a = np.zeros((2, 3, 4))
+    b = np.ones((2, 3, 4))
+    assert np.allclose(_relative(a, b), 1.0)
+    assert np.allclose(_relative(2 * b, b), 1.0)
+    assert np.allclose(_relative(b, b), 0.0)
+
+
+def test_config_validation():
+    with pytest.raises(InvalidInput, match="zero_fraction"):
+        Fig4Config(zero_fraction=1.0)
+    with pytest.raises(InvalidInput, match="record_every"):
+        Fig4Config(steps=1501)

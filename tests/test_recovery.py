@@ -1,0 +1,322 @@
+"""Tests of kinred.recovery: batched ℓ1 solver, exact references, η rule, recover()."""
+
+import numpy as np
+import pytest
+
+from kinred.errors import InvalidInput
+from kinred.projection import DenseProjection
+from kinred.recovery import (
+    basis_pursuit,
+    estimate_eta,
+    lasso,
+    recover,
+    relative_error,
+    stack_projections,
+)
+from kinred.recovery._kernels import _admm_step_nb, admm_step_numpy
+from kinred.recovery._reference import (
+    reference_basis_pursuit,
+    reference_bpdn,
+    reference_lasso,
+)
+
+
+def gaussian_projections(rng, L, k, d):
+    """L independent Gaussian projections with N(0, 1/k) entries (the paper's normalization)."""
+    return [rng.standard_normal((k, d)) / np.sqrt(k) for _ in range(L)]
+
+
+def sparse_columns(rng, d, K, n, nonneg=False):
+    X = np.zeros((d, n))
+    for j in range(n):
+        vals = rng.standard_normal(K)
+        X[rng.choice(d, K, replace=False), j] = np.abs(vals) if nonneg else vals
+    return X
+
+
+# ---------------------------------------------------------------------------------------------
+# numba kernel vs numpy twin
+
+
+@pytest.mark.parametrize("lasso_form", [False, True])
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_kernel_matches_numpy_twin(lasso_form, nonneg):
+    rng = np.random.default_rng(1)
+    n, d, m = 7, 11, 5
+    arrs = {k: rng.standard_normal((n, d)) for k in ("z", "u", "p")}
+    arrs.update({k: rng.standard_normal((n, m)) for k in ("Az", "v", "q", "Y")})
+    thr = rng.uniform(0.05, 1.0, n)
+    param = np.abs(rng.standard_normal(n))
+    param[0] = 1e3  # a row whose point is already inside the ball
+    outs = []
+    for fn in (_admm_step_nb, admm_step_numpy):
+        c = {k: v.copy() for k, v in arrs.items()}
+        a = np.zeros((n, d))
+        b = np.zeros((n, m))
+        fn(c["z"], c["Az"], c["u"], c["v"], c["p"], c["q"], a, b, thr, c["Y"], param, 1.6, lasso_form, nonneg)
+        outs.append([c["u"], c["v"], c["p"], c["q"], a, b])
+    for x, y in zip(*outs):
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-14)
+    if nonneg:
+        assert np.all(outs[0][0] >= 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# acceptance: exact recovery inside the phase transition
+
+
+def test_exact_recovery_inside_phase_transition():
+    """d = 200, K = 40 (80 % zeros), kL = 120 (6 projections into R^20): >= 99 % of 200 exact."""
+    d, K, L, k = 200, 40, 6, 20
+    recovered = 0
+    for batch in range(4):  # a different stacked matrix per batch
+        rng = np.random.default_rng(100 + batch)
+        Ms = gaussian_projections(rng, L, k, d)
+        X = sparse_columns(rng, d, K, 50)
+        res = basis_pursuit(Ms, stack_projections(Ms) @ X)
+        err = np.linalg.norm(res.Z - X, axis=0) / np.linalg.norm(X, axis=0)
+        recovered += int(np.sum(err <= 1e-6))
+    assert recovered >= 198, recovered
+
+
+# ---------------------------------------------------------------------------------------------
+# agreement with the exact references
+
+
+def test_basis_pursuit_matches_highs():
+    rng = np.random.default_rng(2)
+    m, d = 30, 60
+    A = rng.standard_normal((m, d)) / np.sqrt(m)
+    X = sparse_columns(rng, d, 14, 12)  # beyond the transition: BP differs from X sometimes
+    Y = A @ X
+    res = basis_pursuit(A, Y, tol=1e-8)
+    assert np.all(res.status == "optimal"), res.counts()
+    for j in range(Y.shape[1]):
+        z = reference_basis_pursuit(A, Y[:, j])
+        l1 = np.abs(z).sum()
+        assert abs(res.objective[j] - l1) <= 1e-8 * l1
+        assert np.linalg.norm(res.Z[:, j] - z) <= 1e-6 * np.linalg.norm(z)
+        assert res.residual[j] <= 1e-10 * np.linalg.norm(Y[:, j])
+
+
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_bpdn_matches_clarabel(nonneg):
+    rng = np.random.default_rng(3)
+    m, d, n = 30, 60, 10
+    A = rng.standard_normal((m, d)) / np.sqrt(m)
+    X = sparse_columns(rng, d, 6, n, nonneg=nonneg)
+    Y = A @ X + 0.05 * rng.standard_normal((m, n))
+    eta = 0.05 * np.sqrt(m) * rng.uniform(0.5, 1.5, n)  # per-column η
+    res = basis_pursuit(A, Y, eta, nonneg=nonneg, tol=1e-8, max_iter=20000)
+    assert np.all(res.status == "optimal"), res.counts()
+    assert np.all(res.gap <= 1e-8)
+    for j in range(n):
+        z = reference_bpdn(A, Y[:, j], eta[j], nonneg=nonneg)
+        l1 = np.abs(z).sum()
+        assert abs(res.objective[j] - l1) <= 1e-5 * l1
+        assert np.linalg.norm(res.Z[:, j] - z) <= 1e-5 * np.linalg.norm(z)
+        # the constraint is active at the solution (η < ‖y‖), to round-off
+        assert abs(res.residual[j] - eta[j]) <= 1e-9 * eta[j]
+    if nonneg:
+        assert np.all(res.Z >= 0)
+
+
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_lasso_matches_clarabel(nonneg):
+    rng = np.random.default_rng(4)
+    m, d, n = 30, 60, 8
+    A = rng.standard_normal((m, d)) / np.sqrt(m)
+    X = sparse_columns(rng, d, 6, n, nonneg=nonneg)
+    Y = A @ X + 0.05 * rng.standard_normal((m, n))
+    lam = 0.05 * rng.uniform(0.5, 2.0, n)
+    res = lasso(A, Y, lam, nonneg=nonneg, tol=1e-8, max_iter=20000)
+    assert np.all(res.status == "optimal"), res.counts()
+    for j in range(n):
+        z = reference_lasso(A, Y[:, j], lam[j], nonneg=nonneg)
+        obj = 0.5 * np.sum((A @ z - Y[:, j]) ** 2) + lam[j] * np.abs(z).sum()
+        assert abs(res.objective[j] - obj) <= 1e-6 * obj
+        assert res.objective[j] <= obj * (1 + 1e-9)  # never worse than the reference
+        assert np.linalg.norm(res.Z[:, j] - z) <= 1e-5 * np.linalg.norm(z)
+
+
+def test_lasso_orthogonal_design_is_soft_threshold():
+    """For A with orthonormal columns the LASSO solution is soft(Aᵀy, λ) in closed form."""
+    rng = np.random.default_rng(5)
+    Q, _ = np.linalg.qr(rng.standard_normal((40, 25)))
+    Y = rng.standard_normal((40, 6))
+    lam = 0.3
+    c = Q.T @ Y
+    expect = np.sign(c) * np.maximum(np.abs(c) - lam, 0)
+    res = lasso(Q, Y, lam)
+    np.testing.assert_allclose(res.Z, expect, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------------------------
+# invariances, trivial and infeasible columns
+
+
+def test_scaling_invariance():
+    """min ‖z‖₁ s.t. ‖cAz − cy‖ ≤ cη has the same solution; scaling y and η by s scales z."""
+    rng = np.random.default_rng(6)
+    A = rng.standard_normal((40, 80)) / np.sqrt(40)
+    X = sparse_columns(rng, 80, 8, 5)
+    Y = A @ X + 0.01 * rng.standard_normal((40, 5))
+    eta = 0.01 * np.sqrt(40)
+    base = basis_pursuit(A, Y, eta)
+    assert np.all(base.status == "optimal")
+    scaled_A = basis_pursuit(1e3 * A, 1e3 * Y, 1e3 * eta)
+    np.testing.assert_allclose(scaled_A.Z, base.Z, rtol=1e-8, atol=1e-10)
+    s = np.array([1e-4, 1.0, 7.0, 1e3, 2.0])
+    scaled_y = basis_pursuit(A, Y * s, eta * s)
+    np.testing.assert_allclose(scaled_y.Z, base.Z * s, rtol=1e-8, atol=1e-10 * s.max())
+
+
+def test_zero_and_infeasible_columns():
+    A = np.array([[1.0, 0.0, 1.0], [1.0, 0.0, 1.0]])  # rank one: range = span{(1, 1)}
+    Y = np.array([[0.1, 2.0, 1.0], [0.1, 2.0, -1.0]])
+    res = basis_pursuit(A, Y, np.array([0.5, 0.0, 0.1]))
+    assert list(res.status) == ["zero", "optimal", "infeasible"]
+    np.testing.assert_array_equal(res.Z[:, 0], 0.0)
+    assert abs(np.abs(res.Z[:, 1]).sum() - 2.0) < 1e-10  # ‖z‖₁ = 2 on the segment z₀ + z₂ = 2
+    assert np.all(np.isnan(res.Z[:, 2]))
+    assert not res.converged[2]
+
+
+def test_projection_objects_and_stacking():
+    rng = np.random.default_rng(7)
+    Ms = gaussian_projections(rng, 3, 10, 40)
+    stacked = stack_projections([DenseProjection(Ms[0]), Ms[1], DenseProjection(Ms[2])])
+    np.testing.assert_array_equal(stacked, np.vstack(Ms))
+    x = np.zeros(40)
+    x[[3, 17]] = [1.0, -2.0]
+    res = basis_pursuit([DenseProjection(M) for M in Ms], stacked @ x)
+    np.testing.assert_allclose(res.Z[:, 0], x, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------------------------
+# the automatic η rule
+
+
+def test_auto_eta_covers_noise_and_recovers_like_oracle():
+    rng = np.random.default_rng(8)
+    d, L, k, K, n = 200, 6, 20, 40, 40
+    Ms = gaussian_projections(rng, L, k, d)
+    A = stack_projections(Ms)
+    m = A.shape[0]
+    X = sparse_columns(rng, d, K, n)
+    Y0 = A @ X
+    sigma = 1e-2 * np.linalg.norm(Y0) / np.sqrt(Y0.size)  # 1 % relative noise, known size
+    E = sigma * rng.standard_normal((m, n))
+    est = estimate_eta(A, Y0 + E, groups=np.arange(n) // 20, blocks=[k] * L)
+    e_norm = np.linalg.norm(E, axis=0)
+    assert np.mean(est.eta >= e_norm) >= 0.9  # covers the true ‖e‖ with high probability
+    assert np.all(est.eta <= 2.0 * e_norm)  # and is not wildly larger
+    assert np.all(np.abs(est.sigma / sigma - 1) < 0.25)
+    auto = basis_pursuit(A, Y0 + E, est.eta, tol=1e-5, max_iter=2000)
+    oracle = basis_pursuit(A, Y0 + E, e_norm, tol=1e-5, max_iter=2000)
+    err_auto = np.linalg.norm(auto.Z - X) / np.linalg.norm(X)
+    err_oracle = np.linalg.norm(oracle.Z - X) / np.linalg.norm(X)
+    assert err_auto <= 1.5 * err_oracle, (err_auto, err_oracle)
+
+
+# ---------------------------------------------------------------------------------------------
+# recover()
+
+
+def test_recover_exact_trajectories_and_relative_error():
+    rng = np.random.default_rng(9)
+    T, N, d, L, k = 3, 5, 60, 3, 10
+    Ms = gaussian_projections(rng, L, k, d)
+    X = np.zeros((T, N, d))
+    for t in range(T):
+        for i in range(N):
+            X[t, i, rng.choice(d, 5, replace=False)] = rng.standard_normal(5)
+    Ys = [X @ M.T for M in Ms]  # noise-free projected trajectories (T, N, k)
+    rec = recover(Ms, Ys, eta=0.0, original=X)
+    assert rec.X.shape == (T, N, d) and rec.eta.shape == (T, N) and rec.status.shape == (T, N)
+    assert rec.relative_error.shape == (T,)
+    assert np.all(rec.relative_error < 1e-9)
+    # agent/time layout: perturb one agent at one time only
+    X2 = X.copy()
+    X2[1, 2] *= 1.5
+    err = relative_error(X2, X)
+    assert err[0] == 0.0 and err[2] == 0.0
+    expect = 0.5 * np.linalg.norm(X[1, 2]) / np.linalg.norm(X[1])
+    assert abs(err[1] - expect) < 1e-14
+
+
+def test_recover_auto_eta_with_noise():
+    rng = np.random.default_rng(10)
+    T, N, d, L, k = 2, 20, 100, 4, 15
+    Ms = gaussian_projections(rng, L, k, d)
+    X = np.zeros((T, N, d))
+    for t in range(T):
+        for i in range(N):
+            X[t, i, rng.choice(d, 8, replace=False)] = rng.standard_normal(8)
+    noise = [1e-2 * (t + 1) for t in range(T)]  # the projection error grows in time
+    Ys = [X @ M.T + noise[0] * rng.standard_normal((T, N, k)) * np.array(noise)[:, None, None] / noise[0] for M in Ms]
+    rec = recover(Ms, Ys, original=X)
+    assert rec.eta_rule.startswith("block cross-validated")
+    # η pooled per time, growing with the noise
+    assert np.allclose(rec.eta[0], rec.eta[0, 0]) and rec.eta[1, 0] > 1.5 * rec.eta[0, 0]
+    assert np.all(rec.relative_error < 0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+
+
+def test_validation_errors():
+    rng = np.random.default_rng(11)
+    A = rng.standard_normal((6, 10))
+    Y = rng.standard_normal((6, 3))
+    with pytest.raises(InvalidInput, match="Y must have m = 6 rows"):
+        basis_pursuit(A, np.ones((5, 3)))
+    Ybad = Y.copy()
+    Ybad[2, 1] = np.nan
+    with pytest.raises(InvalidInput, match="Y must be finite"):
+        basis_pursuit(A, Ybad)
+    with pytest.raises(InvalidInput, match="eta must be >= 0"):
+        basis_pursuit(A, Y, -0.1)
+    with pytest.raises(InvalidInput, match="eta must be >= 0"):
+        basis_pursuit(A, Y, np.array([0.1, -1.0, 0.0]))
+    with pytest.raises(InvalidInput, match=r"eta must be a scalar or have shape \(3,\)"):
+        basis_pursuit(A, Y, np.zeros(4))
+    with pytest.raises(InvalidInput, match="lam must be >= 0"):
+        lasso(A, Y, -1.0)
+    with pytest.raises(InvalidInput, match="tol must be"):
+        basis_pursuit(A, Y, tol=0.0)
+    with pytest.raises(InvalidInput, match="relax must be"):
+        basis_pursuit(A, Y, relax=2.0)
+    Abad = A.copy()
+    Abad[0, 0] = np.inf
+    with pytest.raises(InvalidInput, match="A must be finite"):
+        basis_pursuit(Abad, Y)
+    with pytest.raises(InvalidInput, match="same source dimension"):
+        stack_projections([np.ones((2, 5)), np.ones((2, 6))])
+    with pytest.raises(InvalidInput, match="at least one projection"):
+        stack_projections([])
+
+
+def test_recover_validation_errors():
+    rng = np.random.default_rng(12)
+    Ms = gaussian_projections(rng, 2, 4, 12)
+    Ys = [rng.standard_normal((3, 5, 4)) for _ in range(2)]
+    with pytest.raises(InvalidInput, match="same length L"):
+        recover(Ms, Ys[:1])
+    with pytest.raises(InvalidInput, match=r"last axis k = 4"):
+        recover(Ms, [Ys[0], rng.standard_normal((3, 5, 3))])
+    with pytest.raises(InvalidInput, match=r"shape \(T, N\) = \(3, 5\)"):
+        recover(Ms, [Ys[0], rng.standard_normal((3, 6, 4))])
+    bad = Ys[1].copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(InvalidInput, match=r"projected_trajectories\[1\] must be finite"):
+        recover(Ms, [Ys[0], bad])
+    with pytest.raises(InvalidInput, match="eta must be one of 'auto'"):
+        recover(Ms, Ys, eta="oracle")
+    with pytest.raises(InvalidInput, match="eta must be >= 0"):
+        recover(Ms, Ys, eta=-1.0)
+    with pytest.raises(InvalidInput, match=r"original must have shape \(3, 5, 12\)"):
+        recover(Ms, Ys, eta=0.0, original=np.zeros((3, 5, 11)))
+    with pytest.raises(InvalidInput, match="groups must be an integer array"):
+        estimate_eta(stack_projections(Ms), rng.standard_normal((8, 4)), groups=np.zeros(3, int))
