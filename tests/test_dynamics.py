@@ -178,3 +178,20 @@ def test_weights_and_state_validation():
         Scene([Alignment()]).rhs(np.zeros((3, 2)))
     with pytest.raises(InvalidInput, match="not an Effect"):
         Scene([object()])
+
+
+@pytest.mark.parametrize("d", [2, 3, 4, 30])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_default_strips_both_distance_paths_equal_twin(d, threads):
+    # default strip layout (no block=): differences for d <= 3, Gram + fix-up above
+    x, v = _data(700, d, seed=d)
+    x[3] = x[4]                                      # coincident agents
+    effects = [Alignment(CuckerSmale(0.8, 1.62)), AttractionRepulsion(Morse(soft=0.1))]
+    old = get_num_threads()
+    set_num_threads(threads)
+    try:
+        fast = Scene(effects, "sum").rhs(x, v)[1]
+    finally:
+        set_num_threads(old)
+    ref = Scene(effects, "sum", engine="numpy").rhs(x, v)[1]
+    assert np.max(np.abs(fast - ref)) <= 1e-12 * np.max(np.abs(ref))

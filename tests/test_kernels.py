@@ -91,3 +91,67 @@ def test_invalid_kernel_parameters():
         CuckerSmale(G=1.0, beta=-1.0)
     with pytest.raises(InvalidInput, match="la"):
         Morse(la=0.0)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 6])
+def test_sqdist_diff_equals_numpy_twin(k):
+    rng = np.random.default_rng(10 + k)
+    Y = rng.normal(size=(90, k))
+    Y[5] = Y[7]                      # coincident pair: exactly 0
+    Y[9] = Y[11] + 1e-9              # very close pair
+    Y[20:30] += 1e6                  # a far cluster: differences stay exact
+    YT = np.ascontiguousarray(Y.T)
+    out = np.empty((17, 90 - 4))
+    _kernels.sqdist_rows(YT, 4, 21, 4, out)
+    ref = _kernels.sqdist_numpy(Y[4:21], Y[4:])
+    mask = ref > 0
+    assert np.all(out[~mask] == 0.0) and (~mask).sum() >= 17      # self pairs + coincident
+    assert np.max(np.abs(out[mask] - ref[mask]) / ref[mask]) < 1e-12
+
+
+def test_sqdist_gram_diag_and_offsets():
+    # strip layout of the engine: rows i0:i1 against columns i0:, self pairs at (a, a)
+    rng = np.random.default_rng(3)
+    Y = rng.normal(size=(70, 12))
+    Y[40] = Y[41]
+    Y -= Y.mean(axis=0)
+    n = np.einsum("ij,ij->i", Y, Y)
+    out = np.full((25, 70 - 30), np.nan)
+    _kernels.sqdist_block(Y[30:55], Y[30:], n[30:55], n[30:], out, diag=0)
+    ref = _kernels.sqdist_numpy(Y[30:55], Y[30:])
+    assert np.all(np.diag(out[:, :25]) == 0.0) and out[10, 11] == 0.0 and out[11, 10] == 0.0
+    mask = ref > 0
+    assert np.max(np.abs(out[mask] - ref[mask]) / ref[mask]) < 1e-12
+
+
+@pytest.mark.parametrize("n2", [0, 1, 2, 3, 7])
+def test_cs_halfint_in_place(n2):
+    rng = np.random.default_rng(n2)
+    q = rng.exponential(3.0, (9, 31)) ** 2
+    ref = _kernels.cs_numpy(q, 1.3, n2 / 2)
+    got = _kernels.cs_halfint(q, 1.3, n2, q)          # out aliases the input
+    assert got is q and np.max(np.abs(q - ref) / ref) < 1e-12
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_inplace_gemm_on_sub_blocks(native, monkeypatch):
+    from kinred.dynamics import _threads
+    if not native:
+        monkeypatch.setattr(_threads, "HAVE_GEMM", False)
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(13, 40))                       # a strip; columns 5: are a sub-block
+    Z = rng.normal(size=(40, 4))
+    A = rng.normal(size=(40, 4))
+    A0 = A.copy()
+    _threads.gemm(1.0, P, Z, 1.0, A[:13])               # A_I += P Z
+    _threads.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[5:], trans_a=True)    # A_J += P_Jᵀ Z_I
+    expect = A0.copy()
+    expect[:13] += np.einsum("ij,jl->il", P, Z)
+    expect[5:] += np.einsum("ji,jl->il", P[:, 5:], Z[:13])
+    with pytest.raises(ValueError, match="shapes"):
+        _threads.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[18:], trans_a=True)
+    assert np.max(np.abs(A - expect)) < 1e-13
+    C = np.full((13, 35), np.nan)
+    _threads.gemm(-2.0, P[:, :7], Z[:35, :].repeat(2, axis=1)[:, :7], 0.0, C, trans_b=True)
+    assert np.max(np.abs(C + 2.0 * np.einsum("il,jl->ij", P[:, :7],
+                                              Z[:35].repeat(2, axis=1)[:, :7]))) < 1e-13

@@ -7,13 +7,24 @@ NaN and Inf propagate exactly as in IEEE arithmetic, so divergence stays detecta
 
 Kernels
 -------
-``sqdist_gram_fix(G, ni, nj, Yi, Yj, tau)``
-    Turns a Gram block ``G = Yi @ Yj.T`` into squared distances
-    ``‖yᵢ‖² + ‖yⱼ‖² − 2⟨yᵢ, yⱼ⟩`` in place and recomputes by differences every entry whose
-    value is below ``tau·(‖yᵢ‖² + ‖yⱼ‖²)``. Twin: :func:`sqdist_numpy` (pure differences).
+``sqdist_gram_fix(G, ni, nj, Yi, Yj, tau, diag)``
+    Turns a block ``G = −2 Yi Yjᵀ`` (written by BLAS) into squared distances
+    ``‖yᵢ‖² + ‖yⱼ‖² − 2⟨yᵢ, yⱼ⟩`` in place in one branch-free (vectorizable) pass that also
+    counts the entries below ``tau·(‖yᵢ‖² + ‖yⱼ‖²)``; only rows with such entries get a second
+    pass that recomputes them by differences. Twin: :func:`sqdist_numpy` (pure differences).
+``sqdist_diff(YT, i0, i1, j0, out)``
+    Squared distances by differences from transposed coordinates ``YT (k, N)``, vectorized
+    over columns (the engine's path for ``k ≤ 3``). Twin: :func:`sqdist_numpy`.
 ``cs_halfint(Q, G, n2, out)``
     Cucker–Smale kernel ``G (1 + q)^(−n2/2)`` for integer ``n2`` with sqrt and division only
-    (vectorizable without SVML). Twin: :func:`cs_numpy` (``G·exp(−β·log1p(q))``).
+    (``out`` may alias ``Q``). Twin: :func:`cs_numpy` (``G·exp(−β·log1p(q))``).
+
+Performance notes (Xeon with AVX-512, no SVML in numba): numba's scalar ``exp``/``log1p``
+cost ≈ 20 ns per entry, numpy's SIMD ufuncs ≈ 1 ns, and square roots and divisions ≈ 1 ns
+each even vectorized; kernels therefore evaluate transcendentals with numpy ufuncs on the
+engine's cache-sized blocks and numba does only cheap arithmetic. A vectorized polynomial
+``exp(−β log(1+q))`` written in numba was measured no faster than the ufunc chain (LLVM
+emits 256-bit vectors here) and was not kept.
 
 Accuracy of the Gram path
 -------------------------
@@ -32,8 +43,12 @@ import collections
 import numpy as np
 from numba import njit
 
+from . import _threads
+
 __all__ = [
     "COUNTERS",
+    "sqdist_diff",
+    "sqdist_rows",
     "tau_for",
     "sqdist_gram_fix",
     "sqdist_block",
@@ -51,31 +66,62 @@ COUNTERS: collections.Counter = collections.Counter()
 _FM = {"reassoc", "contract"}
 
 
-@njit(cache=True, nogil=True, fastmath=_FM)
-def sqdist_gram_fix(G, ni, nj, Yi, Yj, tau):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def sqdist_gram_fix(G, ni, nj, Yi, Yj, tau, diag):  # pragma: no cover - compiled
     b, m = G.shape
     k = Yi.shape[1]
     nfix = 0
     for a in range(b):
         na = ni[a]
         row = G[a]
+        # one branch-free (vectorizable) pass: q = |y_a|^2 + |y_j|^2 + G (G holds -2<y_a, y_j>)
+        # and the number of entries at or below the fix-up threshold
+        cnt = 0
         for j in range(m):
-            row[j] = na + nj[j] - 2.0 * row[j]
-        for c0 in range(0, m, 64):
-            c1 = min(m, c0 + 64)
-            cnt = 0
-            for j in range(c0, c1):
-                cnt += 1 if row[j] <= tau * (na + nj[j]) else 0
-            if cnt > 0:
-                for j in range(c0, c1):
-                    if row[j] <= tau * (na + nj[j]):
-                        s = 0.0
-                        for l in range(k):
-                            t = Yi[a, l] - Yj[j, l]
-                            s += t * t
-                        row[j] = s
-                        nfix += 1
+            r = na + nj[j] + row[j]
+            row[j] = r
+            cnt += r <= tau * (na + nj[j])
+        s_ = a + diag if diag >= 0 else -1
+        if s_ >= 0 and s_ < m:
+            cnt -= row[s_] <= tau * (na + nj[s_])
+            row[s_] = 0.0           # the agent itself
+        if cnt > 0:                 # rare: close pairs, recomputed by differences
+            for j in range(m):
+                if j != s_ and row[j] <= tau * (na + nj[j]):
+                    acc = 0.0
+                    for l in range(k):
+                        t = Yi[a, l] - Yj[j, l]
+                        acc += t * t
+                    row[j] = acc
+                    nfix += 1
     return nfix
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def sqdist_diff(YT, i0, i1, j0, out):  # pragma: no cover - compiled
+    k, n = YT.shape
+    m = n - j0
+    for a in range(i1 - i0):
+        row = out[a]
+        for j in range(m):
+            row[j] = 0.0
+        ia = i0 + a
+        for l in range(0, k - 1, 2):
+            y0 = YT[l, ia]
+            y1 = YT[l + 1, ia]
+            r0 = YT[l]
+            r1 = YT[l + 1]
+            for j in range(m):
+                t0 = y0 - r0[j0 + j]
+                t1 = y1 - r1[j0 + j]
+                row[j] += t0 * t0 + t1 * t1
+        if k % 2 == 1:
+            y0 = YT[k - 1, ia]
+            r0 = YT[k - 1]
+            for j in range(m):
+                t0 = y0 - r0[j0 + j]
+                row[j] += t0 * t0
+    return out
 
 
 def tau_for(k: int) -> float:
@@ -86,18 +132,30 @@ def tau_for(k: int) -> float:
 
 def sqdist_block(Yi: np.ndarray, Yj: np.ndarray, ni: np.ndarray, nj: np.ndarray,
                  out: np.ndarray, Xi: np.ndarray | None = None,
-                 Xj: np.ndarray | None = None) -> np.ndarray:
+                 Xj: np.ndarray | None = None, diag: int = -1) -> np.ndarray:
     """Squared distances between the rows of ``Yi (b, k)`` and ``Yj (m, k)`` into ``out (b, m)``.
 
     ``Yi``/``Yj`` are centred coordinates, ``ni``/``nj`` their squared row norms. BLAS Gram
-    product plus the numba fix-up kernel, which recomputes close pairs by differences of the
-    raw (uncentred) rows ``Xi``/``Xj`` (default: ``Yi``/``Yj``) – differences of the inputs
-    are exact to rounding, whereas centring a far-away cloud rounds at its distance scale.
+    product (``−2 Yi Yjᵀ`` straight into ``out``) plus the numba fix-up kernel, which adds the
+    norms and recomputes close pairs by differences of the raw (uncentred) rows ``Xi``/``Xj``
+    (default: ``Yi``/``Yj``) – differences of the inputs are exact to rounding, whereas
+    centring a far-away cloud rounds at its distance scale. ``diag >= 0`` says that row ``a``
+    and column ``a + diag`` are the same agent (set to exactly 0).
     """
-    np.matmul(Yi, Yj.T, out=out)
+    _threads.gemm(-2.0, Yi, Yj, 0.0, out, trans_b=True)
     sqdist_gram_fix(out, ni, nj, Yi if Xi is None else Xi, Yj if Xj is None else Xj,
-                    tau_for(Yi.shape[1]))
+                    tau_for(Yi.shape[1]), int(diag))
     return out
+
+
+def sqdist_rows(YT: np.ndarray, i0: int, i1: int, j0: int, out: np.ndarray) -> np.ndarray:
+    """Squared distances by differences, rows ``i0:i1`` against columns ``j0:N``.
+
+    ``YT (k, N)`` holds the coordinates transposed (contiguous), ``out (i1 − i0, N − j0)``.
+    Exact to rounding (no cancellation), vectorized over columns; the engine's path for small
+    dimensions. Twin: :func:`sqdist_numpy`.
+    """
+    return sqdist_diff(YT, int(i0), int(i1), int(j0), out)
 
 
 def sqdist_numpy(Yi: np.ndarray, Yj: np.ndarray) -> np.ndarray:
@@ -112,8 +170,9 @@ def sqdist_numpy(Yi: np.ndarray, Yj: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=_FM)
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
 def cs_halfint(Q, G, n2, out):  # pragma: no cover - compiled
+    # one pass per row, branch-free inner loops; out may alias Q
     b, m = Q.shape
     half = n2 // 2
     odd = n2 % 2
@@ -121,16 +180,42 @@ def cs_halfint(Q, G, n2, out):  # pragma: no cover - compiled
         q = Q[a]
         o = out[a]
         if odd:
-            for j in range(m):
-                o[j] = np.sqrt(1.0 + q[j])
+            if half == 0:
+                for j in range(m):
+                    o[j] = G / np.sqrt(1.0 + q[j])
+            elif half == 1:
+                for j in range(m):
+                    w = 1.0 + q[j]
+                    o[j] = G / (w * np.sqrt(w))
+            elif half == 2:
+                for j in range(m):
+                    w = 1.0 + q[j]
+                    o[j] = G / (w * w * np.sqrt(w))
+            else:
+                for j in range(m):
+                    w = 1.0 + q[j]
+                    p = np.sqrt(w)
+                    for _ in range(half):
+                        p *= w
+                    o[j] = G / p
         else:
-            for j in range(m):
-                o[j] = 1.0
-        for _ in range(half):
-            for j in range(m):
-                o[j] *= 1.0 + q[j]
-        for j in range(m):
-            o[j] = G / o[j]
+            if half == 0:
+                for j in range(m):
+                    o[j] = G
+            elif half == 1:
+                for j in range(m):
+                    o[j] = G / (1.0 + q[j])
+            elif half == 2:
+                for j in range(m):
+                    w = 1.0 + q[j]
+                    o[j] = G / (w * w)
+            else:
+                for j in range(m):
+                    w = 1.0 + q[j]
+                    p = w
+                    for _ in range(half - 1):
+                        p *= w
+                    o[j] = G / p
     return out
 
 

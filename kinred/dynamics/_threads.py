@@ -74,3 +74,78 @@ def pool(n: int) -> ThreadPoolExecutor:
         _STATE["pool"] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kinred-dyn")
         _STATE["pool_n"] = n
     return _STATE["pool"]
+
+
+# ---------------------------------------------------------------------- direct BLAS (dgemm)
+def _find_cblas_dgemm():
+    """``cblas_dgemm`` of numpy's own OpenBLAS (ILP64 ``scipy_cblas_dgemm64_``), or None.
+
+    Calling it directly lets the engine accumulate ``C += A·B`` in place (``beta = 1``) on
+    sub-blocks with arbitrary leading dimensions, which ``np.matmul`` cannot do; the same
+    library (and thread setting) as numpy's ``@`` is used.
+    """
+    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
+    for path in libs:
+        for name, itype in (("scipy_cblas_dgemm64_", ctypes.c_int64), ("cblas_dgemm64_", ctypes.c_int64),
+                            ("scipy_cblas_dgemm", ctypes.c_int), ("cblas_dgemm", ctypes.c_int)):
+            try:
+                fn = getattr(ctypes.CDLL(path), name)
+            except (OSError, AttributeError):
+                continue
+            fn.restype = None
+            fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
+                           ctypes.c_double, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
+                           ctypes.c_double, ctypes.c_void_p, itype]
+            return fn
+    return None
+
+
+_CBLAS_DGEMM = _find_cblas_dgemm()
+_ROW, _NT, _T = 101, 111, 112
+
+
+def _check_gemm_works() -> bool:
+    if _CBLAS_DGEMM is None:
+        return False
+    try:
+        a = np.arange(6.0).reshape(2, 3)
+        b = np.arange(12.0).reshape(3, 4)
+        c = np.ones((2, 4))
+        _CBLAS_DGEMM(_ROW, _NT, _NT, 2, 4, 3, 2.0, a.ctypes.data, 3, b.ctypes.data, 4, 1.0,
+                     c.ctypes.data, 4)
+        return bool(np.array_equal(c, 1.0 + 2.0 * (a @ b)))
+    except Exception:  # pragma: no cover - defensive: fall back to numpy
+        return False
+
+
+#: Whether the in-place ``gemm`` path is available (otherwise numpy ``matmul`` + add).
+HAVE_GEMM = _check_gemm_works()
+
+
+def gemm(alpha: float, A: np.ndarray, B: np.ndarray, beta: float, C: np.ndarray,
+         trans_a: bool = False, trans_b: bool = False) -> None:
+    """``C ← α·op(A)·op(B) + β·C`` in place, ``op(X) = X`` or ``Xᵀ``.
+
+    ``A``, ``B``, ``C`` are float64 arrays with unit stride along their last axis (row-major
+    blocks of larger arrays are fine). Falls back to numpy when the direct BLAS is missing.
+    """
+    m, k = A.shape[::-1] if trans_a else A.shape
+    kb, n = B.shape[::-1] if trans_b else B.shape
+    if kb != k or C.shape != (m, n):
+        raise ValueError(f"gemm: incompatible shapes op(A) {(m, k)}, op(B) {(kb, n)}, C {C.shape}")
+    if m == 0 or n == 0:
+        return
+    if (not HAVE_GEMM or k == 0 or A.strides[-1] != 8 or B.strides[-1] != 8
+            or C.strides[-1] != 8 or C.dtype != np.float64):
+        prod = (A.T if trans_a else A) @ (B.T if trans_b else B)
+        if beta == 0.0:
+            np.multiply(prod, alpha, out=C)
+        else:
+            if beta != 1.0:
+                C *= beta
+            C += alpha * prod if alpha != 1.0 else prod
+        return
+    _CBLAS_DGEMM(_ROW, _T if trans_a else _NT, _T if trans_b else _NT, m, n, k, alpha,
+                 A.__array_interface__["data"][0], max(A.strides[0] // 8, A.shape[1], 1),
+                 B.__array_interface__["data"][0], max(B.strides[0] // 8, B.shape[1], 1), beta,
+                 C.__array_interface__["data"][0], max(C.strides[0] // 8, C.shape[1], 1))

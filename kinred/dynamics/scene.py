@@ -21,15 +21,25 @@ The engine
 ----------
 For each distance source needed by some effect (``x`` and/or ``v`` – never one that no
 effect needs) the engine walks over row strips ``I = [i0, i1)`` against columns ``j ≥ i0``
-(each unordered pair once, memory ``O(N·block)``):
+(each unordered pair once, memory ``O(N·block)``; strips of about 64k entries, ≈ 512 kB, so
+a block stays in L2):
 
-1. squared distances of centred coordinates by a BLAS Gram block plus a numba fix-up that
-   recomputes close pairs by differences (relative error ≤ 4e-13, see ``_kernels``);
-2. kernel values with numpy ufuncs (or the sqrt/division numba path for half-integer β)
-   on the preallocated block;
-3. ``Φ @ [c z, c]`` and ``Φᵀ @ [c z, c]`` by BLAS, giving ``Σⱼ cⱼ φᵢⱼ zⱼ`` and ``Σⱼ cⱼ φᵢⱼ``;
-   the contribution is ``Σⱼ cⱼ φᵢⱼ zⱼ − (Σⱼ cⱼ φᵢⱼ) zᵢ`` with the carrier ``z`` centred (so
-   velocity fluctuations near 1e-15 keep their relative accuracy).
+1. squared distances: for ``k ≤ 3`` by differences (numba, vectorized over columns); else
+   a BLAS Gram block ``−2 Y_I Y_Jᵀ`` of centred coordinates written straight into the strip,
+   plus one numba pass that adds the norms and recomputes close pairs by differences
+   (relative error ≤ 4e-13, see ``_kernels``);
+2. kernel values with numpy SIMD ufuncs in place on the block (the last effect of a source
+   overwrites the distances);
+3. two in-place BLAS products per strip, ``A_I += Φ_I,[i0:] Z_[i0:]`` and, by symmetry,
+   ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` with ``Z = [c z, c]`` (``dgemm`` with ``β = 1`` on
+   sub-blocks, no temporaries): one kernel block feeds both orientations, so every unordered
+   pair's kernel is evaluated once. This gives ``Σⱼ cⱼ φᵢⱼ zⱼ`` and the row sums
+   ``Σⱼ cⱼ φᵢⱼ``; the contribution is ``Σⱼ cⱼ φᵢⱼ zⱼ − (Σⱼ cⱼ φᵢⱼ) zᵢ`` with the carrier
+   ``z`` centred (so velocity fluctuations near 1e-15 keep their relative accuracy).
+
+With ``n`` engine threads (:func:`~kinred.dynamics.set_num_threads`) the strips are dealt
+out to ``n`` Python threads (numba kernels and BLAS release the GIL; BLAS runs one thread
+per engine thread), each with its own accumulator.
 
 A scene without pairwise effects costs ``O(N·d)`` per evaluation.
 """
@@ -49,8 +59,37 @@ from .effects import Effect, Noise, SelfPropulsion
 __all__ = ["Scene", "project_state"]
 
 
-def _default_block(n: int) -> int:
-    return int(min(n, max(32, 262_144 // max(n, 1))))
+#: Dimensions up to which distances are computed by differences (numba, vectorized over
+#: columns) rather than by the Gram product plus fix-up.
+_SMALL_K = 3
+
+#: Target number of pairwise entries per strip: ≈ 512 kB of float64 for small dimensions (the
+#: block stays in L2 for the elementwise kernel passes) and 2× more from ``_BIG_K`` on, where
+#: the BLAS products dominate and thin strips would spend their time packing ``Z`` (a
+#: ``(m, k+1)`` operand re-packed for every strip: overhead ≈ 1/(2·rows) of the flops).
+_STRIP_ELEMS = 65_536
+_BIG_K = 48
+
+
+def _strips(n: int, block: int | None, dim: int = 1) -> list:
+    """Row strips ``[(i0, i1)]`` of the upper triangle ``j >= i0``.
+
+    With ``block`` given: fixed ``block`` rows per strip. Otherwise strips of about
+    ``_STRIP_ELEMS`` entries each (2× that for ``dim >= _BIG_K``; rows ``i0:i1`` against
+    columns ``i0:n``, at most ``entries/512`` rows), so later strips
+    (shorter rows) get more rows and every strip costs about the same.
+    """
+    if block is not None:
+        return [(i0, min(n, i0 + block)) for i0 in range(0, n, block)]
+    elems = _STRIP_ELEMS * (2 if dim >= _BIG_K else 1)
+    out = []
+    i0 = 0
+    while i0 < n:
+        bb = min(elems // 512, max(8, elems // max(n - i0, 1)))
+        i1 = min(n, i0 + bb)
+        out.append((i0, i1))
+        i0 = i1
+    return out
 
 
 class Scene:
@@ -66,7 +105,8 @@ class Scene:
     weights : (N,) array_like, optional
         Probability weights of the agents (validated: finite, >= 0, sum 1); default ``1/N``.
     block : int, optional
-        Rows per strip of the pairwise engine (default ``≈ 2.6e5 / N``, memory ``O(N·block)``).
+        Rows per strip of the pairwise engine (default: strips of about 64k pairwise
+        entries, at most 128 rows; memory ``O(N·block)``).
     engine : {"fast", "numpy"}
         ``"fast"``: the blocked BLAS/numba engine; ``"numpy"``: the plain-numpy twin (direct
         differences, kernels evaluated by ``kernel(s)``), for reference and tests.
@@ -230,61 +270,75 @@ class Scene:
         n = x.shape[0]
         c = self.coefficients(n)
         state = {"x": x, "v": v}
-        centred = {}
-        for key in ("x", "v"):
-            if any(e.source == key or e.carrier == key for e in self._pair):
-                z = state[key]
-                centred[key] = z - z.mean(axis=0)
         dim = x.shape[1]
-        zext = {}
-        for e in self._pair:
-            if e.carrier not in zext:
-                Z = np.empty((n, dim + 1))
-                np.multiply(centred[e.carrier], c[:, None], out=Z[:, :dim])
-                Z[:, dim] = c
-                zext[e.carrier] = Z
-        keys = sorted({(self._tgt(e), e.carrier) for e in self._pair})
-        b = self.block or _default_block(n)
-        strips = [(i0, min(n, i0 + b)) for i0 in range(0, n, b)]
-        nthreads = min(_threads.get_num_threads(), len(strips))
         sources = [s for s in ("x", "v") if any(e.source == s for e in self._pair)]
-        norms = {s: np.einsum("ij,ij->i", centred[s], centred[s]) for s in sources}
+        carriers = sorted({e.carrier for e in self._pair})
+        centred = {}
+        for key in set(carriers) | {s for s in sources if dim > _SMALL_K}:
+            z = state[key]
+            centred[key] = z - z.mean(axis=0)
+        # source geometry: transposed raw rows (differences, small dimension) or centred rows
+        # and their squared norms (Gram path)
+        geo = {}
+        for s in sources:
+            if dim <= _SMALL_K:
+                geo[s] = (np.ascontiguousarray(state[s].T), None)
+            else:
+                Y = centred[s]
+                geo[s] = (Y, np.einsum("ij,ij->i", Y, Y))
+        zext = {}
+        for key in carriers:
+            Z = np.empty((n, dim + 1))
+            np.multiply(centred[key], c[:, None], out=Z[:, :dim])
+            Z[:, dim] = c
+            zext[key] = Z
+        keys = sorted({(self._tgt(e), e.carrier) for e in self._pair})
+        by_source = {s: [(e, getattr(e.kernel, "value_sq", None), zext[e.carrier],
+                          (self._tgt(e), e.carrier)) for e in self._pair if e.source == s]
+                     for s in sources}
+        strips = _strips(n, self.block, dim)
+        nthreads = min(_threads.get_num_threads(), len(strips))
+        maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
+        need_phi = any(len(v_) > 1 for v_ in by_source.values())
 
         def work(my_strips):
             acc = {kk: np.zeros((n, dim + 1)) for kk in keys}
-            qbuf = np.empty(b * n)
-            pbuf = np.empty(b * n)
-            tmp = np.empty((b, dim + 1))
+            qbuf = np.empty(maxel)
+            pbuf = np.empty(maxel) if need_phi else None
             with _threads.blas_threads(1):
                 for i0, i1 in my_strips:
                     bb, m = i1 - i0, n - i0
                     for s in sources:
-                        Y, nn = centred[s], norms[s]
                         q = qbuf[: bb * m].reshape(bb, m)
-                        R = state[s]
-                        _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q,
-                                              R[i0:i1], R[i0:])
+                        Y, nn = geo[s]
+                        if nn is None:
+                            _kernels.sqdist_rows(Y, i0, i1, i0, q)
+                        else:
+                            R = state[s]
+                            _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q,
+                                                  R[i0:i1], R[i0:], diag=0)
                         _kernels.COUNTERS[s] += 1
-                        effs = [e for e in self._pair if e.source == s]
-                        for idx, e in enumerate(effs):
-                            phi = pbuf[: bb * m].reshape(bb, m)
-                            vs = getattr(e.kernel, "value_sq", None)
+                        effs = by_source[s]
+                        for idx, (e, vs, Z, kk) in enumerate(effs):
+                            # the last effect of a source may overwrite the distances
+                            phi = q if idx == len(effs) - 1 else pbuf[: bb * m].reshape(bb, m)
                             if vs is not None:
                                 vs(q, phi)
                             else:
                                 phi[...] = e.kernel(np.sqrt(q))
-                            Z = zext[e.carrier]
-                            A = acc[(self._tgt(e), e.carrier)]
-                            np.matmul(phi, Z[i0:], out=tmp[:bb])
-                            A[i0:i1] += tmp[:bb]
+                            A = acc[kk]
+                            # rows of the strip: Φ_I,[i0:] @ Z[i0:]; columns beyond it, by
+                            # symmetry: Φ_I,[i1:]ᵀ @ Z_I (each unordered pair's φ used twice)
+                            _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
                             if i1 < n:
-                                A[i1:] += phi[:, bb:].T @ Z[i0:i1]
+                                _threads.gemm(1.0, phi[:, bb:], Z[i0:i1], 1.0, A[i1:],
+                                              trans_a=True)
             return acc
 
         if nthreads <= 1:
             accs = [work(strips)]
         else:
-            # balance: strip widths decrease, deal them out in a zig-zag
+            # balance: deal the strips (of about equal work) out in a zig-zag
             groups = [[] for _ in range(nthreads)]
             order = list(range(nthreads)) + list(range(nthreads - 1, -1, -1))
             for i, st in enumerate(strips):
@@ -296,7 +350,8 @@ class Scene:
             for other in accs[1:]:
                 A += other[kk]
             tgt, carrier = kk
-            contrib = A[:, :dim] - A[:, dim:] * centred[carrier]
+            contrib = A[:, :dim]
+            contrib -= A[:, dim:] * centred[carrier]
             out[tgt] = contrib if tgt not in out else out[tgt] + contrib
         return out
 
