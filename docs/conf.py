@@ -75,15 +75,8 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(numpy|scipy|concurrent|dask|distributed|ot|matplotlib)(\..*)?"),
     (r"py:.*", r"(os|pathlib|json|tomllib)(\..*)?"),
 ]
-# References from kinred docstrings to private modules / non-public names that the API pages
-# do not document (reported to the package authors; remove an entry once its docstring is fixed):
-nitpick_ignore = [
-    ("py:mod", "kinred.distance._bracket"),   # kinred/distance/_w1.py, w1() docstring
-    ("py:mod", "kinred.dynamics.effects"),    # kinred/dynamics/scene.py, Scene docstring
-    ("py:mod", "kinred.kinetic._bounds"),     # kinred/kinetic/_bounds.py, effect_constants()
-    ("py:mod", "kinred.measures._file"),      # kinred/measures/_file.py, load_measure()
-    ("py:meth", "_apply"),                    # kinred/projection/_base.py, Projection docstring
-]
+# kinred's own references must all resolve: nothing of kinred is ignored.
+nitpick_ignore: list[tuple[str, str]] = []
 
 # -- HTML --------------------------------------------------------------------------------------
 

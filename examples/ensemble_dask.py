@@ -43,7 +43,7 @@ def main(argv=None):
         runs[executor] = np.array([r["eps"] for r in res.results])
         print(f"{executor:>9}: {len(members)} members in {res.total_time:.2f} s")
     a, b = runs["serial"], runs[other]
-    print(f"mean distortion eps per (kind, k) over realizations:")
+    print("mean distortion eps per (kind, k) over realizations:")
     for kind in ("gaussian", "srht"):
         for k in (16, 32):
             idx = [i for i, m in enumerate(members) if m["kind"] == kind and m["k"] == k]

@@ -19,6 +19,7 @@ __all__ = [
     "as_int",
     "as_choice",
     "as_weights",
+    "as_span",
 ]
 
 
@@ -128,3 +129,14 @@ def as_weights(weights, name: str, n: int, *, atol: float = 1e-9) -> np.ndarray:
     if abs(s - 1.0) > atol:
         raise InvalidInput(f"{name} must sum to one (probability weights), got sum {s!r}")
     return w / s
+
+
+def as_span(t_span, name: str = "t_span") -> tuple[float, float]:
+    """A time interval ``(t0, t1)`` of finite floats with ``t1 > t0``."""
+    try:
+        t0, t1 = t_span
+    except (TypeError, ValueError):
+        raise InvalidInput(f"{name} must be a pair (t0, t1), got {_short(t_span)}") from None
+    t0 = as_float(t0, f"{name}[0]")
+    t1 = as_float(t1, f"{name}[1]", low=t0, low_open=True)
+    return t0, t1

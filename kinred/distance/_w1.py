@@ -7,10 +7,10 @@ import math
 import numpy as np
 
 from .._rng import as_generator
-from .._validate import as_choice, as_float, as_int
+from .._validate import as_choice, as_int
 from ..errors import InvalidInput, TooLarge
 from ._bracket import bracket_atoms, mean_lower
-from ._inputs import Cont1D, Prod, Pts, grid_marginals, marginal, normalize
+from ._inputs import Prod, Pts, grid_marginals, marginal, normalize
 from ._oned import product_upper, w1_1d, w1_atoms_1d, w1_cont_atoms
 from ._pot import emd_dense, emd_lazy
 from ._result import SlicedW1Result, W1Result
@@ -79,7 +79,6 @@ def _quantize_product(p: Prod, budget: int):
     Euclidean W1 between the product and its grid from above (Lemma 4.1, label
     ``lem:W:tensors``, with |·|₂ ≤ |·|₁).
     """
-    d = p.dim
     n = [f.n if isinstance(f, Pts) else 1 for f in p.factors]
 
     def quant(f, k):
@@ -149,7 +148,7 @@ def w1(
           atoms, or atoms declared ``product=True``): the exact W1 for the ℓ1 ground cost,
           :math:`\sum_j W_1(\mu_j,\nu_j)` (Lemma 4.1, label ``lem:W:tensors``); it bounds the
           Euclidean W1 from above. The result has ``metric="l1"``.
-        * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (see :mod:`kinred.distance._bracket`).
+        * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (lower bounds from 1-D projections and a subsampled dual, upper bounds from explicit couplings).
         * ``"auto"`` -- exact-1d in d = 1; exact (dense below ``max_dense_bytes``, lazy above)
           for atomic measures with ``N·M ≤ max_exact_pairs``; otherwise a bracket. Its
           ``method`` and ``note`` say which.

@@ -52,9 +52,9 @@ import numpy as np
 
 from .._validate import as_array, as_choice, as_float, as_int, as_weights
 from ..errors import InvalidInput, NotProjectable
-from ..projection import Projection, as_projection
+from ..projection import as_projection
 from . import _kernels, _threads
-from .effects import Effect, Noise, SelfPropulsion
+from .effects import Effect
 
 __all__ = ["Scene", "project_state"]
 
@@ -98,7 +98,7 @@ class Scene:
     Parameters
     ----------
     effects : sequence of Effect
-        The terms (see :mod:`kinred.dynamics.effects`).
+        The terms (see :class:`kinred.dynamics.Effect` and its subclasses).
     normalize : {"mean", "sum"}
         Pairwise coefficients ``c_j = w_j`` or ``N w_j`` (see the module notes; ``"sum"``
         with ``G = 0.8`` reproduces the paper's §3.4 experiments).

@@ -24,7 +24,6 @@ number of workers, and an interrupted run resumes from its results store.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path

@@ -5,14 +5,14 @@ from __future__ import annotations
 import math
 import time
 import types
-from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Mapping
 
 import numpy as np
 
 from .. import observables as _obs
 from .._rng import as_generator
-from .._validate import as_array, as_choice, as_float, as_int
+from .._validate import as_array, as_choice, as_float, as_int, as_span
 from ..errors import InvalidInput, NotConverged, SimulationDiverged
 from ..dynamics import Scene, SelfPropulsion
 from ._tables import TABLES, RKTable
@@ -201,12 +201,7 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     if not isinstance(scene, Scene):
         raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
     x0, v0 = scene._check_state(x0, v0)
-    try:
-        t0, t1 = t_span
-    except (TypeError, ValueError):
-        raise InvalidInput(f"t_span must be a pair (t0, t1), got {t_span!r}") from None
-    t0 = as_float(t0, "t_span[0]")
-    t1 = as_float(t1, "t_span[1]", low=t0, low_open=True)
+    t0, t1 = as_span(t_span)
     dt = as_float(dt, "dt", low=0.0, low_open=True)
     method = as_choice(method, "method", METHODS)
     if scene.stochastic and method != "euler_maruyama":
@@ -331,15 +326,16 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
                       wall_time=time.perf_counter() - t_start, dt=dt, n_rejected=int(n_rej))
 
 
-def _rk_step(f, table: RKTable, t, x, v, h):
-    """One explicit RK step of ``(x, v)``; returns new arrays."""
-    if table.stages == 1:
-        dx, dv = f(t, x, v)
-        xn = x + h * dx
-        vn = v + h * dv if v is not None else None
-        return xn, vn
+def _stages(f, table: RKTable, t, x, v, h, k_first=None):
+    """Stage derivatives ``[(dxₛ, dvₛ)]`` of one explicit RK step of size ``h`` from ``(x, v)``.
+
+    ``k_first`` reuses a known first stage (FSAL pairs, or a rejected adaptive step).
+    """
     ks = []
     for s in range(table.stages):
+        if s == 0 and k_first is not None:
+            ks.append(k_first)
+            continue
         xs, vs = x, v
         if s:
             xs = x.copy()
@@ -354,15 +350,29 @@ def _rk_step(f, table: RKTable, t, x, v, h):
         if dx is vs:
             dx = dx.copy()
         ks.append((dx, dv))
+    return ks
+
+
+def _combine(x, v, ks, weights, h):
+    """``(x + h Σ wₛ dxₛ, v + h Σ wₛ dvₛ)`` as new arrays."""
     xn = x.copy()
     vn = v.copy() if v is not None else None
-    for s in range(table.stages):
-        b = table.B[s]
-        if b:
-            xn += (h * b) * ks[s][0]
+    for s, w in enumerate(weights):
+        if w:
+            xn += (h * w) * ks[s][0]
             if v is not None:
-                vn += (h * b) * ks[s][1]
+                vn += (h * w) * ks[s][1]
     return xn, vn
+
+
+def _rk_step(f, table: RKTable, t, x, v, h):
+    """One explicit RK step of ``(x, v)``; returns new arrays."""
+    if table.stages == 1:
+        dx, dv = f(t, x, v)
+        xn = x + h * dx
+        vn = v + h * dv if v is not None else None
+        return xn, vn
+    return _combine(x, v, _stages(f, table, t, x, v, h), table.B, h)
 
 
 def _adaptive(f, table, t0, t1, x, v, h, rtol, atol, save_times, record, diverged, bar):
@@ -377,37 +387,10 @@ def _adaptive(f, table, t0, t1, x, v, h, rtol, atol, save_times, record, diverge
         target = save_times[j]
         hh = min(h, target - t)
         hit = hh >= target - t
-        ks = []
-        for s in range(table.stages):
-            if s == 0 and k_first is not None:
-                ks.append(k_first)
-                continue
-            xs = x.copy()
-            vs = v.copy() if v is not None else None
-            for i in range(s):
-                a = table.A[s, i]
-                if a:
-                    xs += (hh * a) * ks[i][0]
-                    if v is not None:
-                        vs += (hh * a) * ks[i][1]
-            dx, dv = f(t + table.C[s] * hh, xs, vs)
-            if dx is vs:
-                dx = dx.copy()
-            ks.append((dx, dv))
-        xn = x.copy()
-        vn = v.copy() if v is not None else None
-        ex = np.zeros_like(x)
-        ev = np.zeros_like(v) if v is not None else None
-        for s in range(table.stages):
-            b, e = table.B[s], table.E[s]
-            if b:
-                xn += (hh * b) * ks[s][0]
-                if v is not None:
-                    vn += (hh * b) * ks[s][1]
-            if e:
-                ex += (hh * e) * ks[s][0]
-                if v is not None:
-                    ev += (hh * e) * ks[s][1]
+        ks = _stages(f, table, t, x, v, hh, k_first)
+        xn, vn = _combine(x, v, ks, table.B, hh)
+        ex, ev = _combine(np.zeros_like(x), np.zeros_like(v) if v is not None else None, ks,
+                          table.E, hh)
         sc = atol + rtol * np.maximum(np.abs(x), np.abs(xn))
         err2 = float(np.sum((ex / sc) ** 2))
         cnt = ex.size

@@ -130,7 +130,7 @@ def _kernel_norms(kernel):
 
 def effect_constants(effect, *, coef_sum: float = 1.0, speed: float = 0.0, diam_x: float = 0.0,
                      diam_v: float = 0.0) -> EffectConstants:
-    r"""Constants of one effect (table in :mod:`kinred.kinetic._bounds`).
+    r"""Constants of one effect (table in ``docs/kinetic.md`` and the ``kinred.kinetic._bounds`` module docstring).
 
     Parameters
     ----------

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, as_choice, as_float, as_int
+from .._validate import as_array, as_choice, as_float, as_int, as_span
 from ..errors import InvalidInput
 from ..measures import Atomic, Measure, Mixture, PushForward, TensorProduct
 from ..projection import Projection, as_projection
@@ -168,16 +168,6 @@ def _save_spec(t_span, dt, method, times, save_every):
     return SaveAt(states=True, observables=())
 
 
-def _check_span(t_span):
-    try:
-        t0, t1 = t_span
-    except (TypeError, ValueError):
-        raise InvalidInput(f"t_span must be a pair (t0, t1), got {t_span!r}") from None
-    t0 = as_float(t0, "t_span[0]")
-    t1 = as_float(t1, "t_span[1]", low=t0, low_open=True)
-    return t0, t1
-
-
 def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
           t_span=(0.0, 1.0), dt: float = 0.01, method: str = "euler", times=None,
           save_every: int | None = None, rule: str = "midpoint", max_atoms: int = 200_000,
@@ -242,7 +232,7 @@ def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
     if mu0.dim % 2:
         raise InvalidInput(f"mu0 must live on the phase space R^(2d) (even dimension: positions "
                            f"then velocities), got dim {mu0.dim}")
-    t_span = _check_span(t_span)
+    t_span = as_span(t_span)
     dt = as_float(dt, "dt", low=0.0, low_open=True)
     max_atoms = as_int(max_atoms, "max_atoms", low=1)
     rule = as_choice(rule, "rule", ("midpoint", "paper"))
@@ -318,7 +308,7 @@ def reduce(solution, scene=None, M=None, *, t_span=None, dt=None, method=None, t
         sc = solution.scene if scene is None else weighted_scene(scene, solution.weights)
         x0, v0, w = solution.x[0], solution.v[0], solution.weights
         eps = solution.eps
-        span = (float(solution.t[0]), float(solution.t[-1])) if t_span is None else _check_span(t_span)
+        span = (float(solution.t[0]), float(solution.t[-1])) if t_span is None else as_span(t_span)
         dt = solution.dt if dt is None else as_float(dt, "dt", low=0.0, low_open=True)
         method = solution.method if method is None else method
         save_t = solution.t if times is None else as_array(times, "times", ndim=1)
@@ -332,7 +322,7 @@ def reduce(solution, scene=None, M=None, *, t_span=None, dt=None, method=None, t
         x0, v0, w = solution.points[:, :d], solution.points[:, d:], solution.weights
         sc = weighted_scene(scene, w)
         eps = 0.0
-        span = _check_span(t_span)
+        span = as_span(t_span)
         dt = as_float(dt, "dt", low=0.0, low_open=True)
         method = "euler" if method is None else method
         save_t = None if times is None else as_array(times, "times", ndim=1)

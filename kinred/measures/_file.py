@@ -196,7 +196,7 @@ def measure_from_dict(data: dict, source: str = "<measure>") -> Measure:
 
 
 def load_measure(path: str | os.PathLike) -> Measure:
-    """Read a measure file (TOML; format in :mod:`kinred.measures._file` and ``docs/measures-file.md``).
+    """Read a measure file (TOML; format in ``docs/measures-file.md``).
 
     Raises
     ------

@@ -19,7 +19,7 @@ __all__ = ["Projection", "DenseProjection", "as_projection"]
 class Projection:
     """Base class of linear maps ``M: ℝᵈ → ℝᵏ`` acting on row vectors.
 
-    Subclasses implement :meth:`_apply` (for a validated ``(n, d)`` float array) and
+    Subclasses implement ``_apply`` (for a validated ``(n, d)`` float array) and
     :meth:`to_dense`; they set ``self.shape = (k, d)``, ``self.kind`` and ``self.seed``.
     """
 

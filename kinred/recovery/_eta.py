@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, as_float, as_int
+from .._validate import as_float, as_int
 from ..errors import InvalidInput
 from ._solver import _check_A, _check_Y, lasso
 
