@@ -21,11 +21,14 @@ single-threaded — see below).
 **One thread per worker.** Multi-threaded BLAS or numba inside several worker processes would
 oversubscribe the cores (and threaded reductions may change round-off). Worker processes are
 therefore started with ``OMP_NUM_THREADS = OPENBLAS_NUM_THREADS = MKL_NUM_THREADS =
-NUMBA_NUM_THREADS = "1"`` (:data:`THREAD_ENV`): for ``"processes"`` these variables are placed
+NUMBA_NUM_THREADS = KINRED_NUM_THREADS = "1"`` (:data:`THREAD_ENV`): for ``"processes"`` these variables are placed
 in the environment the spawned interpreters inherit (they must be set *before* numpy / numba
 are imported, which happens when the child unpickles its first task) and set again by the
 worker initializer; for a LocalCluster they are passed as the nannies' ``env``. Workers of an
-existing scheduler are not under our control: start them with these variables.
+existing scheduler are not under our control: start them with these variables. Every member,
+in every executor (the serial one included), runs the dynamics engine with one thread
+(:func:`kinred.dynamics.set_num_threads`): the engine's round-off depends on its number of
+threads, and the results must not depend on the executor.
 
 **Results store.** With ``store=path`` each finished member is written at once, atomically
 (:mod:`kinred.io`), by the calling process (workers need no shared file system)::
@@ -80,6 +83,7 @@ import numpy as np
 
 from ._rng import member_seed
 from ._validate import as_choice, as_int
+from .dynamics import _threads as _engine_threads
 from .errors import InvalidInput, KinredError
 from .io import ResultFolder, atomic_write_npz, read_npz, to_jsonable
 
@@ -100,6 +104,7 @@ THREAD_ENV: dict[str, str] = {
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
     "NUMBA_NUM_THREADS": "1",
+    "KINRED_NUM_THREADS": "1",
 }
 
 #: Executors accepted by :func:`run_ensemble`.
@@ -267,7 +272,10 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
     seed = member_seed(master_seed, index)
     t0 = time.perf_counter()
     try:
-        out = _normalize_output(fn(dict(params), seed))
+        # one engine thread in every executor: the engine's round-off depends on its thread
+        # count, the results must not depend on the executor
+        with _engine_threads.num_threads(1):
+            out = _normalize_output(fn(dict(params), seed))
     except Exception as exc:  # reported to the caller with the member's identity
         return ("error", index, f"{type(exc).__name__}: {exc}", traceback.format_exc())
     return ("ok", index, out, time.perf_counter() - t0)
@@ -276,6 +284,9 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
 def _worker_init() -> None:
     """Initializer of worker processes: one thread for BLAS/OpenMP/numba."""
     os.environ.update(THREAD_ENV)
+    threads = sys.modules.get("kinred.dynamics._threads")
+    if threads is not None:  # already imported: its default was read before the environment
+        threads.set_num_threads(1)
     numba = sys.modules.get("numba")
     if numba is not None:  # already imported (e.g. by unpickling): limit it explicitly
         try:

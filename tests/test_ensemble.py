@@ -49,8 +49,13 @@ def jl_member(params, seed):
 
 def env_member(params, seed):
     """Reports the thread limits seen by the process running the member."""
-    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
-    return {k: os.environ.get(k, "unset") for k in keys}
+    from kinred.dynamics import get_num_threads
+
+    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS",
+            "KINRED_NUM_THREADS")
+    out = {k: os.environ.get(k, "unset") for k in keys}
+    out["engine_threads"] = str(get_num_threads())  # row strips of the dynamics engine
+    return out
 
 
 def failing_member(params, seed):
@@ -150,6 +155,20 @@ def test_dask_bitwise_identical_to_serial(serial_result, tmp_path):
                         resume=True, progress=False)
     assert back.loaded.all()
     assert_bitwise_equal(serial_result, back)
+
+
+def test_serial_members_run_the_engine_single_threaded():
+    from kinred.dynamics import get_num_threads, set_num_threads
+
+    old = get_num_threads()
+    set_num_threads(2)
+    try:
+        res = run_ensemble(env_member, grid(i=range(2)), master_seed=0, executor="serial",
+                           progress=False)
+        assert [r["engine_threads"] for r in res.results] == ["1", "1"]
+        assert get_num_threads() == 2          # restored after the run
+    finally:
+        set_num_threads(old)
 
 
 @pytest.mark.parametrize("executor", ["processes", "dask"])

@@ -46,6 +46,7 @@ A scene without pairwise effects costs ``O(N·d)`` per evaluation.
 
 from __future__ import annotations
 
+import threading
 from typing import Sequence
 
 import numpy as np
@@ -70,18 +71,40 @@ _SMALL_K = 3
 _STRIP_ELEMS = 65_536
 _BIG_K = 48
 
+#: Per calling thread: the engine's scratch buffers, reused from step to step (fresh
+#: multi-megabyte arrays every step cost more in page faults than the arithmetic on them).
+_SCRATCH = threading.local()
+_SCRATCH_KEEP = 4      # distinct (shape, effect) signatures kept per thread
 
-def _strips(n: int, block: int | None, dim: int = 1) -> list:
+
+def _scratch(sig: tuple, make) -> dict:
+    """The scratch buffers of signature ``sig`` for the calling thread (``make()`` on first use)."""
+    cache = getattr(_SCRATCH, "cache", None)
+    if cache is None:
+        cache = _SCRATCH.cache = {}
+    ws = cache.pop(sig, None)
+    if ws is None:
+        ws = make()
+        while len(cache) >= _SCRATCH_KEEP:
+            cache.pop(next(iter(cache)))
+    cache[sig] = ws        # most recently used last
+    return ws
+
+
+def _strips(n: int, block: int | None, dim: int = 1, nthreads: int = 1) -> list:
     """Row strips ``[(i0, i1)]`` of the upper triangle ``j >= i0``.
 
     With ``block`` given: fixed ``block`` rows per strip. Otherwise strips of about
     ``_STRIP_ELEMS`` entries each (2× that for ``dim >= _BIG_K``; rows ``i0:i1`` against
     columns ``i0:n``, at most ``entries/512`` rows), so later strips
-    (shorter rows) get more rows and every strip costs about the same.
+    (shorter rows) get more rows and every strip costs about the same. With ``nthreads > 1``
+    strips are made small enough that there are at least four per thread (load balance).
     """
     if block is not None:
         return [(i0, min(n, i0 + block)) for i0 in range(0, n, block)]
     elems = _STRIP_ELEMS * (2 if dim >= _BIG_K else 1)
+    if nthreads > 1:
+        elems = max(4096, min(elems, (n * (n + 1) // 2) // (4 * nthreads)))
     out = []
     i0 = 0
     while i0 < n:
@@ -233,24 +256,28 @@ class Scene:
     def _rhs(self, x, v, t):
         """Unvalidated drift; for order 2 ``dx`` is ``v`` itself (no copy)."""
         n = x.shape[0]
-        dv = np.zeros_like(v) if self.order == 2 else None
-        dxe = None
+        dv = dxe = None   # arrays owned by this call (the pairwise results are fresh arrays)
         if self._pair and n > 1:
             contrib = self._pairwise(x, v) if self.engine == "fast" else self._pairwise_numpy(x, v)
-            for tgt, arr in contrib.items():
-                if tgt == "v":
-                    dv += arr
-                else:
-                    dxe = arr if dxe is None else dxe + arr
+            dv = contrib.get("v")
+            dxe = contrib.get("x")
         for e in self._local:
             f = e.drift(x, v, t)
             if self._tgt(e) == "v":
-                dv += f
+                if dv is None:
+                    dv = np.array(f, dtype=float)
+                else:
+                    dv += f
+            elif dxe is None:
+                dxe = np.array(f, dtype=float)
             else:
-                dxe = np.array(f, dtype=float) if dxe is None else dxe + f
+                dxe += f
         if self.order == 2:
+            if dv is None:
+                dv = np.zeros_like(v)
             dx = v if dxe is None else v + dxe
         else:
+            dv = None
             dx = np.zeros_like(x) if dxe is None else dxe
         return dx, dv
 
@@ -273,10 +300,29 @@ class Scene:
         dim = x.shape[1]
         sources = [s for s in ("x", "v") if any(e.source == s for e in self._pair)]
         carriers = sorted({e.carrier for e in self._pair})
-        centred = {}
-        for key in set(carriers) | {s for s in sources if dim > _SMALL_K}:
+        need_centred = sorted(set(carriers) | {s for s in sources if dim > _SMALL_K})
+        keys = sorted({(self._tgt(e), e.carrier) for e in self._pair})
+        nthreads = _threads.get_num_threads()
+        strips = _strips(n, self.block, dim, nthreads)
+        nthreads = min(nthreads, len(strips))
+        maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
+        need_phi = any(sum(e.source == s for e in self._pair) > 1 for s in sources)
+
+        def make():
+            return {
+                "centred": {key: np.empty((n, dim)) for key in need_centred},
+                "zext": {key: np.empty((n, dim + 1)) for key in carriers},
+                "acc": [{kk: np.empty((n, dim + 1)) for kk in keys} for _ in range(nthreads)],
+                "q": [np.empty(maxel) for _ in range(nthreads)],
+                "phi": [np.empty(maxel) if need_phi else None for _ in range(nthreads)],
+            }
+
+        ws = _scratch((n, dim, tuple(need_centred), tuple(carriers), tuple(keys), nthreads,
+                       maxel, need_phi), make)
+        centred = ws["centred"]
+        for key in need_centred:
             z = state[key]
-            centred[key] = z - z.mean(axis=0)
+            np.subtract(z, z.mean(axis=0), out=centred[key])
         # source geometry: transposed raw rows (differences, small dimension) or centred rows
         # and their squared norms (Gram path)
         geo = {}
@@ -286,25 +332,20 @@ class Scene:
             else:
                 Y = centred[s]
                 geo[s] = (Y, np.einsum("ij,ij->i", Y, Y))
-        zext = {}
+        zext = ws["zext"]
         for key in carriers:
-            Z = np.empty((n, dim + 1))
+            Z = zext[key]
             np.multiply(centred[key], c[:, None], out=Z[:, :dim])
             Z[:, dim] = c
-            zext[key] = Z
-        keys = sorted({(self._tgt(e), e.carrier) for e in self._pair})
         by_source = {s: [(e, getattr(e.kernel, "value_sq", None), zext[e.carrier],
                           (self._tgt(e), e.carrier)) for e in self._pair if e.source == s]
                      for s in sources}
-        strips = _strips(n, self.block, dim)
-        nthreads = min(_threads.get_num_threads(), len(strips))
-        maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
-        need_phi = any(len(v_) > 1 for v_ in by_source.values())
 
-        def work(my_strips):
-            acc = {kk: np.zeros((n, dim + 1)) for kk in keys}
-            qbuf = np.empty(maxel)
-            pbuf = np.empty(maxel) if need_phi else None
+        def work(g, my_strips):
+            acc = ws["acc"][g]
+            for A in acc.values():
+                A.fill(0.0)
+            qbuf, pbuf = ws["q"][g], ws["phi"][g]
             with _threads.blas_threads(1):
                 for i0, i1 in my_strips:
                     bb, m = i1 - i0, n - i0
@@ -336,23 +377,30 @@ class Scene:
             return acc
 
         if nthreads <= 1:
-            accs = [work(strips)]
+            accs = [work(0, strips)]
         else:
-            # balance: deal the strips (of about equal work) out in a zig-zag
+            # balance: largest strip first to the least-loaded thread (deterministic)
             groups = [[] for _ in range(nthreads)]
-            order = list(range(nthreads)) + list(range(nthreads - 1, -1, -1))
-            for i, st in enumerate(strips):
-                groups[order[i % len(order)]].append(st)
-            accs = list(_threads.pool(nthreads).map(work, groups))
+            loads = [0] * nthreads
+            for i0, i1 in sorted(strips, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
+                g = loads.index(min(loads))
+                groups[g].append((i0, i1))
+                loads[g] += (i1 - i0) * (n - i0)
+            accs = list(_threads.pool(nthreads).map(work, range(nthreads),
+                                                    [sorted(gr) for gr in groups]))
         out = {}
         for kk in keys:
             A = accs[0][kk]
             for other in accs[1:]:
                 A += other[kk]
             tgt, carrier = kk
-            contrib = A[:, :dim]
-            contrib -= A[:, dim:] * centred[carrier]
-            out[tgt] = contrib if tgt not in out else out[tgt] + contrib
+            # a fresh array (the caller keeps it): Σⱼ cⱼφᵢⱼ zⱼ − (Σⱼ cⱼφᵢⱼ) zᵢ
+            contrib = np.multiply(A[:, dim:], centred[carrier])
+            np.subtract(A[:, :dim], contrib, out=contrib)
+            if tgt in out:
+                out[tgt] += contrib
+            else:
+                out[tgt] = contrib
         return out
 
     def _pairwise_numpy(self, x, v):
