@@ -195,3 +195,27 @@ def test_default_strips_both_distance_paths_equal_twin(d, threads):
         set_num_threads(old)
     ref = Scene(effects, "sum", engine="numpy").rhs(x, v)[1]
     assert np.max(np.abs(fast - ref)) <= 1e-12 * np.max(np.abs(ref))
+
+
+def test_scratch_reuse_never_aliases_results(monkeypatch):
+    """The engine reuses its scratch buffers between calls: a drift returned earlier must not
+    change when the scene is evaluated again (on another state), and large workspaces are not
+    kept at all."""
+    from kinred.dynamics import Alignment, CuckerSmale, Scene, scene as scene_mod
+
+    rng = np.random.default_rng(3)
+    x1, v1, x2, v2 = (rng.normal(size=(60, 7)) for _ in range(4))
+    sc = Scene([Alignment(CuckerSmale(G=1.0, beta=0.8))])
+    _, dv1 = sc.rhs(x1, v1)
+    keep = dv1.copy()
+    _, dv2 = sc.rhs(x2, v2)
+    np.testing.assert_array_equal(dv1, keep)
+    _, dv1b = sc.rhs(x1, v1)
+    np.testing.assert_array_equal(dv1b, keep)          # same numbers from reused buffers
+    twin = Scene([Alignment(CuckerSmale(G=1.0, beta=0.8))], engine="numpy").rhs(x2, v2)[1]
+    np.testing.assert_allclose(dv2, twin, rtol=1e-12, atol=1e-12)
+
+    scene_mod._SCRATCH.cache = {}
+    monkeypatch.setattr(scene_mod, "_SCRATCH_MAX_BYTES", 1024)
+    sc.rhs(x1, v1)
+    assert scene_mod._SCRATCH.cache == {}               # too large to keep

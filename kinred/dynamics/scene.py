@@ -74,17 +74,24 @@ _BIG_K = 48
 #: Per calling thread: the engine's scratch buffers, reused from step to step (fresh
 #: multi-megabyte arrays every step cost more in page faults than the arithmetic on them).
 _SCRATCH = threading.local()
-_SCRATCH_KEEP = 4      # distinct (shape, effect) signatures kept per thread
+_SCRATCH_KEEP = 2                  # signatures kept per thread (e.g. an original and a projection)
+_SCRATCH_MAX_BYTES = 256 * 2**20   # larger workspaces are not kept between calls
 
 
 def _scratch(sig: tuple, make) -> dict:
-    """The scratch buffers of signature ``sig`` for the calling thread (``make()`` on first use)."""
+    """The scratch buffers of signature ``sig`` for the calling thread (``make()`` on first use).
+
+    ``make()`` returns ``(buffers, nbytes)``; workspaces above :data:`_SCRATCH_MAX_BYTES` are
+    used once and released (at that size the arithmetic dwarfs the allocation).
+    """
     cache = getattr(_SCRATCH, "cache", None)
     if cache is None:
         cache = _SCRATCH.cache = {}
     ws = cache.pop(sig, None)
     if ws is None:
-        ws = make()
+        ws, nbytes = make()
+        if nbytes > _SCRATCH_MAX_BYTES:
+            return ws
         while len(cache) >= _SCRATCH_KEEP:
             cache.pop(next(iter(cache)))
     cache[sig] = ws        # most recently used last
@@ -309,13 +316,15 @@ class Scene:
         need_phi = any(sum(e.source == s for e in self._pair) > 1 for s in sources)
 
         def make():
+            nbytes = 8 * (n * dim * len(need_centred) + n * (dim + 1) * len(carriers)
+                          + nthreads * (n * (dim + 1) * len(keys) + maxel * (1 + need_phi)))
             return {
                 "centred": {key: np.empty((n, dim)) for key in need_centred},
                 "zext": {key: np.empty((n, dim + 1)) for key in carriers},
                 "acc": [{kk: np.empty((n, dim + 1)) for kk in keys} for _ in range(nthreads)],
                 "q": [np.empty(maxel) for _ in range(nthreads)],
                 "phi": [np.empty(maxel) if need_phi else None for _ in range(nthreads)],
-            }
+            }, nbytes
 
         ws = _scratch((n, dim, tuple(need_centred), tuple(carriers), tuple(keys), nthreads,
                        maxel, need_phi), make)

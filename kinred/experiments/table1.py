@@ -245,7 +245,7 @@ def _figures(result: Table1Result) -> list[tuple[str, bytes]]:
     for n_fig, beta in enumerate(cfg.betas, start=1):
         b = float(beta)
         ks = cfg.figure_ks.get(beta, cfg.figure_ks.get(b, tuple(cfg.ks[:2])))
-        fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
         orig = result.gamma[b][cfg.d][0]
         for ax, k in zip(axes[0], ks):
             if k not in result.gamma[b]:
