@@ -155,3 +155,12 @@ def test_cli_smoke(tmp_path, capsys):
     assert folder.is_complete
     assert sorted(n for n in folder.list() if n.endswith(".png")) == ["cost_quantization.png", "cost_w1.png"]
     assert validate_report_html(folder.read_text("report.html")) == 2
+
+
+@pytest.mark.parametrize("make", [CostConfig, CostConfig.quick, CostConfig.smoke],
+                         ids=["full", "quick", "smoke"])
+def test_every_preset_is_a_valid_config(make):
+    # each preset passes its own validation (a quick preset once did not: rec_steps=100 with
+    # rec_every=125), so `kinred cost`, `--quick` and `--smoke` all start
+    cfg = make()
+    assert cfg.rec_steps % cfg.rec_every == 0 and cfg.proj_steps % cfg.proj_every == 0

@@ -7,7 +7,7 @@ import pytest
 
 from kinred.cli import main
 from kinred.errors import InvalidInput
-from kinred.experiments.fig4 import Fig4Config, _relative
+from kinred.experiments.fig4 import Fig4Config, _relative, strategies
 from kinred.report import validate_report_html
 
 
@@ -65,3 +65,15 @@ def test_config_validation():
         Fig4Config(zero_fraction=1.0)
     with pytest.raises(InvalidInput, match="record_every"):
         Fig4Config(steps=1501)
+
+
+def test_three_strategies_table():
+    """§3.3.1's three strategies at equal measurement count: L·k rows (one projection into
+    ℝᴸᵏ, or L into ℝᵏ) recover far better than k rows; the table has the paper's columns."""
+    res = strategies(Fig4Config.quick(N=40, d=60, steps=100), L=3, k=10)
+    assert [r["rows"] for r in res.rows] == [10, 30, 30]
+    e1, e2, e3 = (r["final_error"] for r in res.rows)
+    assert e1 > 0.8                      # 10 rows for ~12 nonzeros in R^60: no recovery
+    assert e2 < 0.5 * e1 and e3 < 0.6 * e1
+    assert all(r["simulate_s"] > 0 and r["recover_s"] > 0 for r in res.rows)
+    assert "L projections into R^k" in res.to_text()

@@ -171,7 +171,7 @@ class CostConfig:
         base = dict(proj_N=100, proj_d=200, proj_G=8.0, proj_ks=(2, 5, 10, 25, 50, 100),
                     proj_kinds=("gaussian", "srht"), proj_reps=2,
                     rec_N=40, rec_d=100, rec_k=10, rec_Ls=(1, 3, 5, 9),
-                    rec_tols=(1e-2, 1e-4), rec_steps=100,
+                    rec_tols=(1e-2, 1e-4), rec_steps=100, rec_every=50,
                     q_d=6, q_atoms=(1, 4, 16, 64, 256, 1024, 4096, 16384), q_fine=2048,
                     q_exact_max=128,
                     int_N=30, int_steps=(10, 20, 40, 80, 160, 320), int_rtols=(1e-3, 1e-5, 1e-7, 1e-9),
