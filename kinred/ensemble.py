@@ -21,7 +21,7 @@ single-threaded — see below).
 **One thread per worker.** Multi-threaded BLAS or numba inside several worker processes would
 oversubscribe the cores (and threaded reductions may change round-off). Worker processes are
 therefore started with ``OMP_NUM_THREADS = OPENBLAS_NUM_THREADS = MKL_NUM_THREADS =
-NUMBA_NUM_THREADS = KINRED_NUM_THREADS = "1"`` (:data:`THREAD_ENV`): for ``"processes"`` these variables are placed
+NUMBA_NUM_THREADS = "1"`` (:data:`THREAD_ENV`): for ``"processes"`` these variables are placed
 in the environment the spawned interpreters inherit (they must be set *before* numpy / numba
 are imported, which happens when the child unpickles its first task) and set again by the
 worker initializer; for a LocalCluster they are passed as the nannies' ``env``. Workers of an
@@ -104,7 +104,6 @@ THREAD_ENV: dict[str, str] = {
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
     "NUMBA_NUM_THREADS": "1",
-    "KINRED_NUM_THREADS": "1",
 }
 
 #: Executors accepted by :func:`run_ensemble`.
@@ -284,9 +283,6 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
 def _worker_init() -> None:
     """Initializer of worker processes: one thread for BLAS/OpenMP/numba."""
     os.environ.update(THREAD_ENV)
-    threads = sys.modules.get("kinred.dynamics._threads")
-    if threads is not None:  # already imported: its default was read before the environment
-        threads.set_num_threads(1)
     numba = sys.modules.get("numba")
     if numba is not None:  # already imported (e.g. by unpickling): limit it explicitly
         try:

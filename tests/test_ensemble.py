@@ -51,8 +51,7 @@ def env_member(params, seed):
     """Reports the thread limits seen by the process running the member."""
     from kinred.dynamics import get_num_threads
 
-    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS",
-            "KINRED_NUM_THREADS")
+    keys = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
     out = {k: os.environ.get(k, "unset") for k in keys}
     out["engine_threads"] = str(get_num_threads())  # row strips of the dynamics engine
     return out

@@ -12,20 +12,7 @@ import numpy as np
 
 from .._validate import as_int
 
-#: Environment variable that sets the engine's default number of threads (the ensemble's
-#: worker processes set it to 1 so that one simulation runs per core).
-ENV_VAR = "KINRED_NUM_THREADS"
-
-
-def _default_threads() -> int:
-    """``$KINRED_NUM_THREADS`` if set to a positive integer, else ``min(cpu_count, 2)``."""
-    raw = os.environ.get(ENV_VAR, "").strip()
-    if raw.isdigit() and int(raw) >= 1:
-        return min(int(raw), 256)
-    return max(1, min(os.cpu_count() or 1, 2))
-
-
-_STATE = {"n": _default_threads(), "pool": None, "pool_n": 0}
+_STATE = {"n": max(1, min(os.cpu_count() or 1, 2)), "pool": None, "pool_n": 0}
 
 
 def _find_openblas_local():
@@ -63,9 +50,8 @@ def set_num_threads(n: int) -> None:
     """Set the number of threads one simulation uses (row strips run in ``n`` threads).
 
     With ``n = 1`` a simulation is single-threaded, including BLAS calls made by the engine:
-    an ensemble can then run one simulation per core. The default is ``$KINRED_NUM_THREADS``
-    when set (worker processes of :func:`kinred.ensemble.run_ensemble` get 1), else
-    ``min(cpu_count, 2)``.
+    an ensemble can then run one simulation per core (:func:`kinred.ensemble.run_ensemble`
+    runs every member with one thread). The default is ``min(cpu_count, 2)``.
 
     Examples
     --------
