@@ -72,7 +72,7 @@ class CuckerSmale:
         self.G = as_float(G, "G", low=0.0)
         self.beta = as_float(beta, "beta", low=0.0)
         n2 = 2.0 * self.beta
-        self._n2 = int(n2) if (n2 == int(n2) and n2 <= 2) else None
+        self._n2 = int(n2) if (n2 == int(n2) and n2 <= 5) else None
 
     def __call__(self, s):
         s = np.asarray(s, dtype=float)

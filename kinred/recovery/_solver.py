@@ -20,9 +20,13 @@ iteration is
     p &\\leftarrow p + z - u, \\qquad q \\leftarrow q + Az - v
 
 (with over-relaxation of ``z`` and ``Az``). By the matrix inversion lemma with
-``G = I + AAᵀ (m × m)``, ``w = G⁻¹(b − Aa)``, ``z = a + Aᵀw``, ``Az = b − w``: two products
-with ``(m, d)`` matrices over the whole batch per iteration, and one Cholesky factorization of
-``G`` for the whole solve. The penalty ``μ`` enters only as the threshold of the ``u``-prox
+``G = I + AAᵀ (m × m)``, ``w = G⁻¹(b − Aa)``, ``z = a + Aᵀw``, ``Az = b − w``. With the
+eigendecomposition ``AAᵀ = U diag(σ²) Uᵀ`` (once per solve) the iteration runs in rotated
+``m``-coordinates (``b̃ = Uᵀb``, ``B = UᵀA``): ``w̃ = (b̃ − B a)/(1 + σ²)``, ``z = a + Bᵀw̃``,
+``Uᵀ(Az) = b̃ − w̃`` – two products with ``(m, d)`` matrices per iteration and no ``m × m``
+one (the ``v``-step, a ball around ``y`` or the LASSO average, commutes with ``U``). Columns
+are independent problems: they are iterated in chunks of 128 rows that stay in cache, dealt to
+two threads. The penalty ``μ`` enters only as the threshold of the ``u``-prox
 (``(I + AᵀA)⁻¹`` does not depend on it), so each column has its own ``μ``, adapted by residual
 balancing without any re-factorization.
 
@@ -49,7 +53,9 @@ duality gap by ``cert_tol``; the polished solution is exact up to round-off.
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +64,8 @@ import scipy.linalg as sla
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ._kernels import admm_step
+from ..dynamics._threads import blas_threads
+from ._kernels import admm_step, support_solve
 
 __all__ = [
     "RecoveryResult",
@@ -83,8 +90,9 @@ class RecoveryResult:
     status : (n_rhs,) ndarray of str
         ``"optimal"``: polished on its support and certified by a dual vector (relative duality
         gap ≤ ``cert_tol``); ``"converged"``: ADMM primal and dual residuals below ``tol`` (and
-        the polished point kept if feasible with no larger objective); ``"max_iter"``: stopped at
-        ``max_iter`` (best iterate returned); ``"zero"``: ``z = 0`` is optimal (``‖y‖ ≤ η``, or
+        the polished point kept if it is feasible and its objective exceeds ADMM's by at most
+        the factor ``1 + 10·tol``); ``"max_iter"``: stopped at ``max_iter`` (best iterate
+        returned); ``"zero"``: ``z = 0`` is optimal (``‖y‖ ≤ η``, or
         ``‖Aᵀy‖∞ ≤ λ`` for the LASSO); ``"infeasible"``: ``min_z ‖Az − y‖ > η``.
     iterations : (n_rhs,) ndarray of int
         ADMM iterations spent on each column.
@@ -245,7 +253,10 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
     -------
     z : (n, d) polished points (zeros where the polish was impossible),
     ok : (n,) certified, feasible : (n,) polished point feasible with the right signs,
-    gap : (n,) relative duality gap of the certificate.
+    gap : (n,) relative duality gap of the certificate,
+    dual : (n, d) where the polished point is feasible, the candidate certificate ``Âᵀν``;
+    where it is not (the least-squares residual ``r₀`` on ``S`` exceeds ``η``), ``Âᵀr₀``
+    scaled so that its largest entry off ``S`` is 1 (zeros where the polish was impossible).
     """
     n, d = signs.shape
     m = An.shape[0]
@@ -253,12 +264,13 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
     ok = np.zeros(n, dtype=bool)
     feas = np.zeros(n, dtype=bool)
     gap = np.full(n, np.nan)
+    dual = np.zeros((n, d))
     if n == 0:
-        return z, ok, feas, gap
+        return z, ok, feas, gap, dual
     counts = np.count_nonzero(signs, axis=1)
     usable = np.flatnonzero((counts > 0) & (counts <= m))
     if usable.size == 0:
-        return z, ok, feas, gap
+        return z, ok, feas, gap, dual
     rows_all = usable[np.argsort(counts[usable], kind="stable")]  # similar sizes together
     bp = form == "bpdn" and nu0 is not None
     chunk = 512
@@ -270,10 +282,6 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
         kmax = int(cnt.max())
         idx = np.argsort(sg == 0, axis=1, kind="stable")[:, :kmax]  # support first
         mask = np.arange(kmax)[None, :] < cnt[:, None]
-        gram = AtA[idx[:, :, None], idx[:, None, :]]
-        gram *= mask[:, :, None] & mask[:, None, :]
-        ar = np.arange(kmax)
-        gram[:, ar, ar] += ~mask  # identity on the padding
         s = np.take_along_axis(sg, idx, axis=1).astype(float) * mask
         y = Yh[rows]
         rhs = [np.take_along_axis(y @ An, idx, axis=1) * mask, s]
@@ -281,11 +289,10 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
             nu = nu0[rows]
             rhs.append(np.take_along_axis(nu @ An, idx, axis=1) * mask)
         rhs = np.stack(rhs, axis=2)
-        try:
-            sol = np.linalg.solve(gram, rhs)
-        except np.linalg.LinAlgError:
-            sol = np.stack([np.linalg.lstsq(g, r_, rcond=None)[0] for g, r_ in zip(gram, rhs)])
-        sol *= mask[:, :, None]
+        sol, solved = support_solve(AtA, idx, cnt, rhs)
+        for t in np.flatnonzero(~solved):  # numerically singular Gram matrix: least squares
+            sup = idx[t, : cnt[t]]
+            sol[t, : cnt[t]] = np.linalg.lstsq(AtA[np.ix_(sup, sup)], rhs[t, : cnt[t]], rcond=None)[0]
 
         def full(x):
             out = np.zeros((nb, d))
@@ -316,23 +323,39 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
             nu = r / np.where(lam > 0, lam, 1.0)[:, None]
         c = nu @ An  # (nb, d) = (Âᵀν)ᵀ
         viol = (np.max(c, axis=1) if nonneg else np.max(np.abs(c), axis=1)) - 1.0
+        if bp:
+            # second candidate: the minimum-norm ν with Â_Sᵀν = s, i.e. w = Â_S(Â_SᵀÂ_S)⁻¹s
+            # (the classical certificate of exact recovery); keep the less violated one
+            c2 = w @ An
+            viol2 = (np.max(c2, axis=1) if nonneg else np.max(np.abs(c2), axis=1)) - 1.0
+            pick = viol2 < viol
+            nu[pick], c[pick], viol[pick] = w[pick], c2[pick], viol2[pick]
         l1 = np.sum(np.abs(zS), axis=1)
         # relative duality gap of the dual-feasible point ν / max(1, ‖Âᵀν‖∞)
         sc = np.maximum(1.0, viol + 1.0)
         if form == "lasso":
             primal = 0.5 * np.sum(r * r, axis=1) + lam * l1
             tl = lam[:, None] * nu / sc[:, None]
-            dual = np.sum(tl * y, axis=1) - 0.5 * np.sum(tl * tl, axis=1)
+            dual_obj = np.sum(tl * y, axis=1) - 0.5 * np.sum(tl * tl, axis=1)
         else:
             primal = l1
-            dual = (np.sum(nu * y, axis=1) - p * np.linalg.norm(nu, axis=1)) / sc
-        g = np.maximum(primal - dual, 0.0) / np.maximum(np.abs(primal), 1e-300)
+            dual_obj = (np.sum(nu * y, axis=1) - p * np.linalg.norm(nu, axis=1)) / sc
+        g = np.maximum(primal - dual_obj, 0.0) / np.maximum(np.abs(primal), 1e-300)
         cert = good & sign_ok & (viol <= cert_tol) & (g <= 10 * cert_tol + 1e-12)
         z[rows] = zS
         ok[rows] = cert
         feas[rows] = good & sign_ok
         gap[rows] = g
-    return z, ok, feas, gap
+        # where the least-squares point on S does not reach the constraint (r₀ too large),
+        # the residual's correlations Âᵀr₀ point to the missing columns; else the certificate
+        lead = c.copy()
+        miss = ~good
+        if np.any(miss):
+            corr = r0[miss] @ An
+            off = np.where(sg[miss] == 0, corr if nonneg else np.abs(corr), 0.0)
+            lead[miss] = corr / np.maximum(np.max(off, axis=1), 1e-300)[:, None]
+        dual[rows] = lead
+    return z, ok, feas, gap, dual
 
 
 # ---------------------------------------------------------------------------------------------
@@ -389,11 +412,14 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
         # the weight ω (‖Â‖ = ω) balances the two ADMM constraints u = z and v = Âz
         ph = param[active] / yn if form == "bpdn" else param[active] * weight / (scale * yn)
         AtA = An.T @ An  # (d, d), for the polish
-        G = np.eye(m) + An @ An.T
-        cf = sla.cho_factor(G)
-        Ginv = sla.cho_solve(cf, np.eye(m))
-        Ginv = 0.5 * (Ginv + Ginv.T)
-        GinvA_T = np.ascontiguousarray(sla.cho_solve(cf, An).T)  # (d, m) = (G⁻¹A)ᵀ
+        # rotated m-space: ÂÂᵀ = U diag(σ²) Uᵀ. With B = UᵀÂ and b̃ = Uᵀb the z-update is
+        # w̃ = (b̃ − B a)/(1 + σ²), z = a + Bᵀw̃, Uᵀ(Âz) = b̃ − w̃: two (m, d) products and no
+        # m×m one; the v-step (a ball around ŷ, or the LASSO average) commutes with U.
+        sig2, U = np.linalg.eigh(An @ An.T)
+        Dg = 1.0 / (1.0 + np.maximum(sig2, 0.0))
+        B = np.ascontiguousarray(U.T @ An)    # (m, d)
+        BT = np.ascontiguousarray(B.T)        # (d, m)
+        Yr = np.ascontiguousarray(Yh @ U)     # rotated right-hand sides (rows)
         na = active.size
         ids = active.copy()
         u = np.zeros((na, d))
@@ -418,23 +444,48 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
         while ids.size and it_done < max_iter:
             steps = min(check_every, max_iter - it_done)
             thr = 1.0 / mu
-            for j in range(steps):
-                w = b @ Ginv
-                w -= a @ GinvA_T
-                z = w @ An
-                z += a
-                Az = b - w
-                if j == steps - 1:
-                    u_old, v_old = u.copy(), v.copy()
-                admm_step(z, Az, u, v, p, q, a, b, thr, Yh, ph, relax, lasso_form, nonneg)
+            nrow = ids.size
+            # per row: primal residual, ‖Δu + ΔvB‖ (dual residual / μ), ‖(z, Âz)‖, ‖(u, v)‖,
+            # ‖p + qB‖ – computed by each chunk while its arrays are in cache
+            norms = np.empty((5, nrow))
+
+            def run(sl, steps=steps, thr=thr):
+                # `steps` iterations on the rows `sl` (independent problems), in cache
+                nr = sl.stop - sl.start
+                a_, b_, u_, v_, p_, q_ = a[sl], b[sl], u[sl], v[sl], p[sl], q[sl]
+                z_, w_, Az_ = np.empty((nr, d)), np.empty((nr, m)), np.empty((nr, m))
+                for j in range(steps):
+                    np.matmul(a_, BT, out=w_)
+                    np.subtract(b_, w_, out=w_)
+                    w_ *= Dg                     # w̃ = (b̃ − B a)/(1 + σ²)
+                    np.matmul(w_, B, out=z_)
+                    z_ += a_                     # z = a + Bᵀw̃
+                    np.subtract(b_, w_, out=Az_)  # Uᵀ Â z
+                    if j == steps - 1:
+                        u_old, v_old = u_.copy(), v_.copy()
+                    admm_step(z_, Az_, u_, v_, p_, q_, a_, b_, thr[sl], Yr[sl], ph[sl],
+                              relax, lasso_form, nonneg)
+                # residuals (Boyd et al. 2011, §3.3), rotation-invariant norms
+                nb = norms[:, sl]
+                nb[2] = np.sqrt(np.einsum("ij,ij->i", z_, z_) + np.einsum("ij,ij->i", Az_, Az_))
+                z_ -= u_
+                Az_ -= v_
+                nb[0] = np.sqrt(np.einsum("ij,ij->i", z_, z_) + np.einsum("ij,ij->i", Az_, Az_))
+                nb[3] = np.sqrt(np.einsum("ij,ij->i", u_, u_) + np.einsum("ij,ij->i", v_, v_))
+                v_old -= v_
+                np.matmul(v_old, B, out=z_)      # (v_old − v) B
+                z_ += u_
+                z_ -= u_old                       # −(Δu + Δv B)
+                nb[1] = np.sqrt(np.einsum("ij,ij->i", z_, z_))
+                np.matmul(q_, B, out=z_)
+                z_ += p_
+                nb[4] = np.sqrt(np.einsum("ij,ij->i", z_, z_))
+
+            _run_chunks(run, nrow)
             it_done += steps
-            # residuals (Boyd et al. 2011, §3.3) ------------------------------------------
-            r = np.sqrt(np.sum((z - u) ** 2, axis=1) + np.sum((Az - v) ** 2, axis=1))
-            ds = mu * np.linalg.norm((u - u_old) + (v - v_old) @ An, axis=1)
-            nBz = np.sqrt(np.sum(z * z, axis=1) + np.sum(Az * Az, axis=1))
-            nx = np.sqrt(np.sum(u * u, axis=1) + np.sum(v * v, axis=1))
+            r, ds, nBz, nx = norms[0], mu * norms[1], norms[2], norms[3]
             eps_p = tol * (sq_dm * 1e-2 + np.maximum(nBz, nx))
-            eps_d = tol * (np.sqrt(d) * 1e-2 + mu * np.linalg.norm(p + q @ An, axis=1))
+            eps_d = tol * (np.sqrt(d) * 1e-2 + mu * norms[4])
             conv = (r <= eps_p) & (ds <= eps_d)
             done = conv.copy()
             final_z = u.copy()
@@ -445,11 +496,12 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
                 stable = (np.all(signs == prev_signs, axis=1) & (next_try <= n_check)) | conv
                 cand = np.flatnonzero(stable & np.any(signs != 0, axis=1))
                 if cand.size:
-                    nu0 = -mu[cand, None] * q[cand] if (form == "bpdn") else None
+                    nu0 = -mu[cand, None] * (q[cand] @ U.T) if (form == "bpdn") else None
                     if form == "bpdn" and np.all(ph[cand] > 0):
                         nu0 = None
                     zc, okc, feasc, gc = _polish_split(
-                        An, AtA, Yh[cand], signs[cand], form, ph[cand], nu0, nonneg, cert_tol
+                        An, AtA, Yh[cand], signs[cand], form, ph[cand], nu0, nonneg, cert_tol,
+                        conv[cand],
                     )
                     cert_ok[cand] = okc
                     bad = cand[~okc]
@@ -461,7 +513,9 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
                     keep = np.flatnonzero(conv[cand] & ~okc & feasc)
                     if keep.size and form == "bpdn":
                         kk = cand[keep]
-                        better = np.sum(np.abs(zc[keep]), axis=1) <= np.sum(np.abs(u[kk]), axis=1)
+                        # u is feasible only to the tolerance: allow its ℓ1 to be lower by as much
+                        better = (np.sum(np.abs(zc[keep]), axis=1)
+                                  <= (1.0 + 10.0 * tol) * np.sum(np.abs(u[kk]), axis=1))
                         final_z[kk[better]] = zc[keep[better]]
                 done |= cert_ok
             prev_signs = signs
@@ -491,7 +545,7 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
                 ids = ids[keep]
                 u, v, p, q, mu = u[keep], v[keep], p[keep], q[keep], mu[keep]
                 a, b = a[keep], b[keep]
-                Yh, ph, prev_signs = Yh[keep], ph[keep], prev_signs[keep]
+                Yh, Yr, ph, prev_signs = Yh[keep], Yr[keep], ph[keep], prev_signs[keep]
                 fails, next_try = fails[keep], next_try[keep]
 
     # final quantities in the original scaling ---------------------------------------------
@@ -521,19 +575,106 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
     )
 
 
-def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol):
-    """Polish columns; retry once with the entries whose polished sign disagrees removed."""
-    z, ok, feas, gap = _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol)
-    pruned = np.where(np.sign(z).astype(np.int8) == signs, signs, np.int8(0))
-    retry = np.flatnonzero(~ok & np.any(pruned != signs, axis=1) & np.any(pruned != 0, axis=1))
-    if retry.size:
+#: Expansion threshold of the polish repair (see :func:`_polish_split`).
+_GROW_DELTA = 0.05
+
+
+#: Rows per chunk of the ADMM iterations: every chunk runs ``check_every`` iterations with its
+#: arrays in cache (a whole batch of 10⁴ rows streams ≈ 80 MB per iteration through memory),
+#: and two threads take the chunks (BLAS one thread each; the numba step releases the GIL).
+_CHUNK_ROWS = 128
+
+
+def _run_chunks(run, nrow: int) -> None:
+    """Call ``run(slice)`` on row chunks of ``[0, nrow)``, over two threads when there are
+    several chunks (rows are independent problems: the result does not depend on the split)."""
+    if nrow <= _CHUNK_ROWS or (os.cpu_count() or 1) < 2:
+        run(slice(0, nrow))
+        return
+    nchunks = -(-nrow // _CHUNK_ROWS)
+    bounds = [nrow * i // nchunks for i in range(nchunks + 1)]
+    slices = [slice(bounds[i], bounds[i + 1]) for i in range(nchunks)]
+
+    def worker(g):
+        with blas_threads(1):
+            for sl in slices[g::2]:
+                run(sl)
+
+    fut = _pool().submit(worker, 1)
+    worker(0)
+    fut.result()
+
+
+_POOL = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kinred-admm")
+    return _POOL
+
+
+def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol, expand=None):
+    """Polish columns on the ADMM support, repairing it where the certificate fails.
+
+    Two repairs, each followed by a new polish of the columns it changes:
+
+    1. *expansion*: indices outside the support whose lead (see :func:`_polish`) satisfies
+       ``|lead_j| ≥ 1 − δ`` (``δ = 0.05``, at most 8, the largest) join it with the sign of
+       ``lead_j``. For a feasible polish the lead is the candidate certificate ``Âᵀν`` (the KKT
+       conditions put every support index at ``|(Âᵀν)_j| = 1``); for an infeasible one it is
+       the correlation ``Âᵀr₀`` of the least-squares residual (an orthogonal-matching-pursuit
+       step: with one coefficient ``x_j`` missing, ``r₀ = x_j P⊥a_j``). This recovers
+       coefficients that ADMM's soft threshold has not yet released, e.g. a true entry of
+       relative size 1e-5 (measured: 15 of the benchmark's 10⁴ problems; ADMM alone needs
+       2000–4000 more iterations). An index added in error gets a polished coefficient of
+       about zero and is removed by
+    2. *pruning*: entries whose polished sign disagrees with the support's, or whose size is
+       below ``1e-10`` of the largest, are removed.
+
+    Each repair only proposes a support; acceptance is by the certificate as before. The
+    expansion is tried only on the rows flagged by ``expand`` (default all; the solver flags
+    the columns whose ADMM has converged: on the others ADMM is still moving its support).
+    """
+    m = An.shape[0]
+    z, ok, feas, gap, dual = _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol)
+
+    def attempt(rows, new_signs):
+        """Polish ``rows`` on ``new_signs``; keep a result that is certified, or feasible
+        where the current one is not. Returns the raw polished points."""
         res = _polish_split1(
-            An, AtA, Yh[retry], pruned[retry], form, ph[retry],
-            None if nu0 is None else nu0[retry], nonneg, cert_tol,
+            An, AtA, Yh[rows], new_signs, form, ph[rows],
+            None if nu0 is None else nu0[rows], nonneg, cert_tol,
         )
-        better = res[1] | (res[2] & ~feas[retry])
-        rr = retry[better]
-        z[rr], ok[rr], feas[rr], gap[rr] = (x[better] for x in res)
+        better = res[1] | (res[2] & ~feas[rows] & ~ok[rows])
+        rr = rows[better]
+        z[rr], ok[rr], feas[rr], gap[rr], dual[rr] = (x[better] for x in res)
+        return res[0]
+
+    # 1. expansion: off-support indices with |lead_j| ≥ 1 − δ, at most `top` (the largest)
+    base_z, base_signs = z.copy(), signs.copy()      # what the pruning starts from
+    off = np.where(signs == 0, dual if nonneg else np.abs(dual), -np.inf)
+    top = min(8, off.shape[1] - 1)
+    near = np.zeros(signs.shape, dtype=bool)
+    if top > 0:
+        part = np.argpartition(-off, top, axis=1)[:, :top]
+        np.put_along_axis(near, part,
+                          np.take_along_axis(off, part, axis=1) >= 1.0 - _GROW_DELTA, axis=1)
+    if expand is not None:
+        near &= np.asarray(expand, dtype=bool)[:, None]
+    grow = np.flatnonzero(~ok & np.any(near, axis=1)
+                          & (np.count_nonzero(signs, axis=1) + np.count_nonzero(near, axis=1) <= m))
+    if grow.size:
+        grown = np.where(near[grow], np.sign(dual[grow]).astype(np.int8), signs[grow])
+        base_z[grow] = attempt(grow, grown)
+        base_signs[grow] = grown
+    # 2. pruning: entries whose polished sign disagrees, or that came out negligibly small
+    big = np.abs(base_z) > 1e-10 * np.max(np.abs(base_z), axis=1, keepdims=True)
+    pruned = np.where((np.sign(base_z).astype(np.int8) == base_signs) & big, base_signs, np.int8(0))
+    retry = np.flatnonzero(~ok & np.any(pruned != base_signs, axis=1) & np.any(pruned != 0, axis=1))
+    if retry.size:
+        attempt(retry, pruned[retry])
     return z, ok, feas, gap
 
 
@@ -547,6 +688,7 @@ def _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol):
     ok = np.zeros(n, dtype=bool)
     feas = np.zeros(n, dtype=bool)
     gap = np.full(n, np.nan)
+    dual = np.zeros((n, d))
     for sel, nu in ((ph == 0, nu0), (ph > 0, None)):
         rows = np.flatnonzero(sel)
         if rows.size:
@@ -554,8 +696,8 @@ def _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol):
                 An, AtA, Yh[rows], signs[rows], form, ph[rows],
                 None if nu is None else nu[rows], nonneg, cert_tol, feas_tol,
             )
-            z[rows], ok[rows], feas[rows], gap[rows] = res
-    return z, ok, feas, gap
+            z[rows], ok[rows], feas[rows], gap[rows], dual[rows] = res
+    return z, ok, feas, gap, dual
 
 
 _COMMON_DOC = """
