@@ -61,7 +61,7 @@ def main(argv=None):
         print(f"{n:>5} {'sliced W1 (different distance!)':<34} {ts:>9.3f} {sw.value:>10.5f} "
               f"{'ratio ' + format(sw.value / W, '.3f'):>22}")
         a = np.full(n, 1.0 / n)
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True):
             warnings.simplefilter("always")
             (nv, log), tn = _t(lambda: ot.emd2(a, a, ot.dist(x, y, metric="euclidean"), log=True))
         flag = " (stopped early!)" if log["result_code"] == 3 else ""

@@ -70,7 +70,6 @@ def test_initial_distance_is_zero_and_nonlinear_is_not():
 
 
 def test_weights_enter_the_scene_and_w1():
-    d = 2
     comps = [TensorProduct([Uniform(0, 1), Uniform(0, 1), Uniform(-1, 0), Uniform(0, 0.1)]),
              TensorProduct([Uniform(3, 4), Uniform(0, 1), Uniform(0, 1), Uniform(0, 0.1)])]
     mu = Mixture(comps, [0.8, 0.2])

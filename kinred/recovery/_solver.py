@@ -59,7 +59,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
