@@ -26,9 +26,9 @@ eigendecomposition ``AAᵀ = U diag(σ²) Uᵀ`` (once per solve) the iteration 
 ``Uᵀ(Az) = b̃ − w̃`` – two products with ``(m, d)`` matrices per iteration and no ``m × m``
 one (the ``v``-step, a ball around ``y`` or the LASSO average, commutes with ``U``). Columns
 are independent problems: they are iterated in chunks of 128 rows that stay in cache, dealt to
-two threads. The penalty ``μ`` enters only as the threshold of the ``u``-prox
-(``(I + AᵀA)⁻¹`` does not depend on it), so each column has its own ``μ``, adapted by residual
-balancing without any re-factorization.
+the engine's threads (:func:`kinred.dynamics.set_num_threads`). The penalty ``μ`` enters
+only as the threshold of the ``u``-prox (``(I + AᵀA)⁻¹`` does not depend on it), so each
+column has its own ``μ``, adapted by residual balancing without any re-factorization.
 
 Per-column scaling: ``A`` is divided by its spectral norm and every column ``y`` by its norm
 (``η`` and ``λ`` accordingly), so one starting penalty suits all columns. Converged columns are
@@ -53,9 +53,7 @@ duality gap by ``cert_tol``; the polished solution is exact up to round-off.
 
 from __future__ import annotations
 
-import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +61,8 @@ import numpy as np
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ..dynamics._threads import blas_threads
+from ..dynamics._threads import blas_threads, get_num_threads
+from ..dynamics._threads import pool as thread_pool
 from ._kernels import admm_step, support_solve
 
 __all__ = [
@@ -580,38 +579,32 @@ _GROW_DELTA = 0.05
 
 #: Rows per chunk of the ADMM iterations: every chunk runs ``check_every`` iterations with its
 #: arrays in cache (a whole batch of 10⁴ rows streams ≈ 80 MB per iteration through memory),
-#: and two threads take the chunks (BLAS one thread each; the numba step releases the GIL).
+#: and the engine's threads (:func:`kinred.dynamics.set_num_threads`, one inside ensemble
+#: members) take the chunks, BLAS one thread each; the numba step releases the GIL.
 _CHUNK_ROWS = 128
 
 
 def _run_chunks(run, nrow: int) -> None:
-    """Call ``run(slice)`` on row chunks of ``[0, nrow)``, over two threads when there are
-    several chunks (rows are independent problems: the result does not depend on the split)."""
-    if nrow <= _CHUNK_ROWS or (os.cpu_count() or 1) < 2:
-        run(slice(0, nrow))
-        return
+    """Call ``run(slice)`` on row chunks of ``[0, nrow)``, dealt round-robin to the engine's
+    threads (rows are independent problems: the result does not depend on the split)."""
     nchunks = -(-nrow // _CHUNK_ROWS)
+    nthreads = min(get_num_threads(), nchunks)
     bounds = [nrow * i // nchunks for i in range(nchunks + 1)]
     slices = [slice(bounds[i], bounds[i + 1]) for i in range(nchunks)]
+    if nthreads <= 1:
+        for sl in slices:
+            run(sl)
+        return
 
     def worker(g):
         with blas_threads(1):
-            for sl in slices[g::2]:
+            for sl in slices[g::nthreads]:
                 run(sl)
 
-    fut = _pool().submit(worker, 1)
+    futs = [thread_pool(nthreads).submit(worker, g) for g in range(1, nthreads)]
     worker(0)
-    fut.result()
-
-
-_POOL = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="kinred-admm")
-    return _POOL
+    for f in futs:
+        f.result()
 
 
 def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol, expand=None):
