@@ -470,10 +470,10 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
                 Az_ -= v_
                 nb[0] = np.sqrt(np.einsum("ij,ij->i", z_, z_) + np.einsum("ij,ij->i", Az_, Az_))
                 nb[3] = np.sqrt(np.einsum("ij,ij->i", u_, u_) + np.einsum("ij,ij->i", v_, v_))
-                v_old -= v_
-                np.matmul(v_old, B, out=z_)      # (v_old − v) B
+                np.subtract(v_, v_old, out=v_old)
+                np.matmul(v_old, B, out=z_)      # Δv B
                 z_ += u_
-                z_ -= u_old                       # −(Δu + Δv B)
+                z_ -= u_old                       # Δu + Δv B
                 nb[1] = np.sqrt(np.einsum("ij,ij->i", z_, z_))
                 np.matmul(q_, B, out=z_)
                 z_ += p_
