@@ -37,12 +37,13 @@ def test_cs_halfint_equals_twin(beta):
     assert np.max(np.abs(out - ref) / ref) < 1e-12
 
 
-@pytest.mark.parametrize("beta", [0.0, 0.3, 1.5, 1.62, 1.7, 10.0])
-def test_cucker_smale_value_sq_matches_formula(beta):
+@pytest.mark.parametrize("in_place", [False, True])
+@pytest.mark.parametrize("beta", [0.0, 0.3, 0.5, 1.0, 1.5, 1.62, 1.7, 2.0, 2.5, 10.0])
+def test_cucker_smale_value_sq_matches_formula(beta, in_place):
     g = CuckerSmale(G=0.8, beta=beta)
     s = np.concatenate([[0.0], np.geomspace(1e-8, 1e150, 200)])
     q = (s * s).reshape(1, -1)
-    got = g.value_sq(q, np.empty_like(q))[0]
+    got = g.value_sq(q, q if in_place else np.empty_like(q))[0]
     with np.errstate(over="ignore"):
         ref = 0.8 / (1.0 + s * s) ** beta       # direct formula (inf**beta -> 0)
     assert np.all(np.isfinite(got))

@@ -586,7 +586,8 @@ _CHUNK_ROWS = 128
 
 def _run_chunks(run, nrow: int) -> None:
     """Call ``run(slice)`` on row chunks of ``[0, nrow)``, dealt round-robin to the engine's
-    threads (rows are independent problems: the result does not depend on the split)."""
+    threads (rows are independent problems: the results do not depend on the split or the
+    number of threads, bit for bit, as a test checks)."""
     nchunks = -(-nrow // _CHUNK_ROWS)
     nthreads = min(get_num_threads(), nchunks)
     bounds = [nrow * i // nchunks for i in range(nchunks + 1)]
