@@ -36,6 +36,11 @@ orientations of the pair sum per row, no BLAS and no Python per strip) was measu
 k = 10 and not kept: distances 1.3 ns and the two sums 2.3 ns per pair, i.e. no faster than
 the BLAS products it would replace (the engine's k = 10 step is ≈ 3.9 ns per pair in all).
 
+A dense variant of the d = 200 step (one threaded ``syrk`` for the whole Gram matrix, the
+kernel on N × N, one threaded ``gemm``) was measured against the strips at N = 1000 with 1
+and 2 threads: no faster on this machine (10.4–13 ms per step either way, within the noise),
+and it needs O(N²) memory; not kept.
+
 A loop that reads one array and writes another vectorizes only behind a runtime no-overlap
 check, which fails when the two are the same array: in-place calls therefore go to separate
 kernels that take one array (measured 3.7 vs 0.87 ns per entry for ``cs_halfint``).
