@@ -346,13 +346,12 @@ def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
         gap[rows] = g
         # where the least-squares point on S does not reach the constraint (r₀ too large),
         # the residual's correlations Âᵀr₀ point to the missing columns; else the certificate
-        lead = c.copy()
         miss = ~good
         if np.any(miss):
             corr = r0[miss] @ An
             off = np.where(sg[miss] == 0, corr if nonneg else np.abs(corr), 0.0)
-            lead[miss] = corr / np.maximum(np.max(off, axis=1), 1e-300)[:, None]
-        dual[rows] = lead
+            c[miss] = corr / np.maximum(np.max(off, axis=1), 1e-300)[:, None]
+        dual[rows] = c
     return z, ok, feas, gap, dual
 
 
