@@ -23,8 +23,9 @@ Kernels
 
 Performance notes (Xeon with AVX-512, then AMD EPYC Zen 4; no SVML in numba): numba's
 scalar ``exp``/``log1p`` cost 11–20 ns per entry, numpy's SIMD ufuncs ≈ 1 ns each (the chain
-``G·exp(−β·log1p(q))`` ≈ 2.2–2.7 ns per entry), square roots and divisions ≈ 1 ns even
-vectorized; kernels therefore evaluate transcendentals with numpy ufuncs on the engine's
+``G·exp(−β·log1p(q))`` ≈ 2.2–2.7 ns per entry; ``G·exp2(−β·log2(1+q))``, the engine's
+general-β chain, 1.5× less in float64 and 1.6× less in float32), square roots and
+divisions ≈ 1 ns even vectorized; kernels therefore evaluate transcendentals with numpy ufuncs on the engine's
 cache-sized blocks and numba does only cheap arithmetic (``cs_halfint`` for ``2β ≤ 5``:
 0.87 ns per entry). A branch-free polynomial ``exp(−β log(1+q))`` in numba (bit casts,
 degree-11 ``atanh`` series and degree-13 Taylor, relative error ≤ 3e-16·(1 + β log(1+q)))
@@ -143,9 +144,17 @@ def sqdist_diff(YT, i0, i1, j0, out):  # pragma: no cover - compiled
     return out
 
 
-def tau_for(k: int) -> float:
-    """Fix-up threshold for dimension ``k``: ``2.5e-4·(k+2)`` (capped at 1/8), so that kept
-    Gram entries have relative error ≤ ``2(k+2)u/τ < 1e-12``."""
+def tau_for(k: int, dtype=np.float64) -> float:
+    """Fix-up threshold for dimension ``k``.
+
+    float64: ``2.5e-4·(k+2)`` (capped at 1/8), so that kept Gram entries have relative error
+    ≤ ``2(k+2)u/τ < 1e-12``. float32 (``precision="mixed"``, ``u = 2⁻²⁴``): ``1.2e-3·(k+2)``
+    capped at 1/4, i.e. relative error ≤ 1e-4 up to ``k = 200`` (≤ 5e-4 at ``k = 1000``;
+    typical errors are ``√k·u ≈ 1e-6``); the recomputed close pairs are exact to float64
+    rounding before they are stored.
+    """
+    if np.dtype(dtype) == np.float32:
+        return min(0.25, 1.2e-3 * (k + 2))
     return min(0.125, 2.5e-4 * (k + 2))
 
 
@@ -154,7 +163,8 @@ def sqdist_block(Yi: np.ndarray, Yj: np.ndarray, ni: np.ndarray, nj: np.ndarray,
                  Xj: np.ndarray | None = None, diag: int = -1) -> np.ndarray:
     """Squared distances between the rows of ``Yi (b, k)`` and ``Yj (m, k)`` into ``out (b, m)``.
 
-    ``Yi``/``Yj`` are centred coordinates, ``ni``/``nj`` their squared row norms. BLAS Gram
+    ``Yi``/``Yj`` are centred coordinates, ``ni``/``nj`` their squared row norms, all of the
+    dtype of ``out`` (float64, or float32 for ``precision="mixed"``). BLAS Gram
     product (``−2 Yi Yjᵀ`` straight into ``out``) plus the numba fix-up kernel, which adds the
     norms and recomputes close pairs by differences of the raw (uncentred) rows ``Xi``/``Xj``
     (default: ``Yi``/``Yj``) – differences of the inputs are exact to rounding, whereas
@@ -162,8 +172,9 @@ def sqdist_block(Yi: np.ndarray, Yj: np.ndarray, ni: np.ndarray, nj: np.ndarray,
     and column ``a + diag`` are the same agent (set to exactly 0).
     """
     _threads.gemm(-2.0, Yi, Yj, 0.0, out, trans_b=True)
+    ty = out.dtype.type
     sqdist_gram_fix(out, ni, nj, Yi if Xi is None else Xi, Yj if Xj is None else Xj,
-                    tau_for(Yi.shape[1]), int(diag))
+                    ty(tau_for(Yi.shape[1], out.dtype)), int(diag))
     return out
 
 
@@ -190,7 +201,7 @@ def sqdist_numpy(Yi: np.ndarray, Yj: np.ndarray) -> np.ndarray:
 
 
 @njit(inline="always", fastmath=_FM, boundscheck=False, error_model="numpy")
-def _cs_row(q, o, G, half, odd):  # pragma: no cover - compiled
+def _cs_row(q, o, G, half, odd, one):  # pragma: no cover - compiled
     # G (1 + q)^(-(2 half + odd)/2) over one row, branch-free inner loops. Called with
     # o = q (the same view) for in-place use: after inlining LLVM sees one pointer and
     # vectorizes; two *different* arrays that happen to alias would get the scalar loop
@@ -199,18 +210,18 @@ def _cs_row(q, o, G, half, odd):  # pragma: no cover - compiled
     if odd:
         if half == 0:
             for j in range(m):
-                o[j] = G / np.sqrt(1.0 + q[j])
+                o[j] = G / np.sqrt(one + q[j])
         elif half == 1:
             for j in range(m):
-                w = 1.0 + q[j]
+                w = one + q[j]
                 o[j] = G / (w * np.sqrt(w))
         elif half == 2:
             for j in range(m):
-                w = 1.0 + q[j]
+                w = one + q[j]
                 o[j] = G / (w * w * np.sqrt(w))
         else:
             for j in range(m):
-                w = 1.0 + q[j]
+                w = one + q[j]
                 p = np.sqrt(w)
                 for _ in range(half):
                     p *= w
@@ -221,14 +232,14 @@ def _cs_row(q, o, G, half, odd):  # pragma: no cover - compiled
                 o[j] = G
         elif half == 1:
             for j in range(m):
-                o[j] = G / (1.0 + q[j])
+                o[j] = G / (one + q[j])
         elif half == 2:
             for j in range(m):
-                w = 1.0 + q[j]
+                w = one + q[j]
                 o[j] = G / (w * w)
         else:
             for j in range(m):
-                w = 1.0 + q[j]
+                w = one + q[j]
                 p = w
                 for _ in range(half - 1):
                     p *= w
@@ -236,17 +247,17 @@ def _cs_row(q, o, G, half, odd):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def _cs_halfint_out(Q, G, n2, out):  # pragma: no cover - compiled
+def _cs_halfint_out(Q, G, n2, out, one):  # pragma: no cover - compiled
     for a in range(Q.shape[0]):
-        _cs_row(Q[a], out[a], G, n2 // 2, n2 % 2)
+        _cs_row(Q[a], out[a], G, n2 // 2, n2 % 2, one)
     return out
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def _cs_halfint_inplace(Q, G, n2):  # pragma: no cover - compiled
+def _cs_halfint_inplace(Q, G, n2, one):  # pragma: no cover - compiled
     for a in range(Q.shape[0]):
         r = Q[a]
-        _cs_row(r, r, G, n2 // 2, n2 % 2)
+        _cs_row(r, r, G, n2 // 2, n2 % 2, one)
     return Q
 
 
@@ -254,11 +265,79 @@ def cs_halfint(Q: np.ndarray, G: float, n2: int, out: np.ndarray) -> np.ndarray:
     """Cucker–Smale kernel ``G (1 + q)^(−n2/2)`` of squared distances ``Q (b, m)`` into
     ``out`` (which may be ``Q`` itself: the in-place kernel is then used, which vectorizes;
     a call with two aliasing arrays would fall back to scalar code). Twin: :func:`cs_numpy`."""
+    # G and 1 in the dtype of the output: float32 blocks (precision="mixed") stay float32
+    ty = out.dtype.type
     if out is Q:
-        return _cs_halfint_inplace(Q, float(G), int(n2))
-    return _cs_halfint_out(Q, float(G), int(n2), out)
+        return _cs_halfint_inplace(Q, ty(G), int(n2), ty(1.0))
+    return _cs_halfint_out(Q, ty(G), int(n2), out, ty(1.0))
 
 
 def cs_numpy(Q: np.ndarray, G: float, beta: float) -> np.ndarray:
     """Twin of :func:`cs_halfint`: ``G·exp(−β·log1p(q))`` with ``β = n2/2``."""
     return G * np.exp(-beta * np.log1p(np.asarray(Q, dtype=float)))
+
+
+# ------------------------------------------------------------------ O(N·d) passes of a step
+# Fused single passes over the (N, d) state arrays (each numpy ufunc is a separate pass, with a
+# temporary where dtypes mix; at k = 150 the numpy versions cost ≈ 1 ms of a 9 ms step).
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def centre_rows(z, out):  # pragma: no cover - compiled
+    """``out = z − mean(z, axis=0)`` (the column mean accumulated row by row, as numpy does)."""
+    n, d = z.shape
+    mean = np.zeros(d)
+    for i in range(n):
+        for l in range(d):
+            mean[l] += z[i, l]
+    for l in range(d):
+        mean[l] /= n
+    for i in range(n):
+        for l in range(d):
+            out[i, l] = z[i, l] - mean[l]
+    return out
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def gram_rows(centred, Y, nrm, cast):  # pragma: no cover - compiled
+    """Squared row norms of the Gram operand into ``nrm``; with ``cast`` the operand ``Y`` is
+    first written as ``centred`` rounded to ``Y``'s dtype (float32) and the norms are those
+    of the rounded rows (accumulated in float64), so the Gram formula stays consistent."""
+    n, d = centred.shape
+    for i in range(n):
+        s = 0.0
+        if cast:
+            for l in range(d):
+                Y[i, l] = centred[i, l]
+            for l in range(d):
+                y = np.float64(Y[i, l])
+                s += y * y
+        else:
+            for l in range(d):
+                y = centred[i, l]
+                s += y * y
+        nrm[i] = s
+    return nrm
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def zext_rows(centred, c, Z):  # pragma: no cover - compiled
+    """``Z = [c·z, c]`` (``Z`` of shape ``(N, d+1)``, float64 or float32)."""
+    n, d = centred.shape
+    for i in range(n):
+        ci = c[i]
+        for l in range(d):
+            Z[i, l] = ci * centred[i, l]
+        Z[i, d] = ci
+    return Z
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def pair_finish(A, centred, out):  # pragma: no cover - compiled
+    """``out = A[:, :d] − A[:, d]·z`` in float64: ``Σⱼ cⱼφᵢⱼ zⱼ − (Σⱼ cⱼφᵢⱼ) zᵢ``."""
+    n, d = centred.shape
+    for i in range(n):
+        r = np.float64(A[i, d])
+        for l in range(d):
+            out[i, l] = np.float64(A[i, l]) - r * centred[i, l]
+    return out

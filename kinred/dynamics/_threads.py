@@ -88,57 +88,64 @@ def pool(n: int) -> ThreadPoolExecutor:
     return _STATE["pool"]
 
 
-# ---------------------------------------------------------------------- direct BLAS (dgemm)
-def _find_cblas_dgemm():
-    """``cblas_dgemm`` of numpy's own OpenBLAS (ILP64 ``scipy_cblas_dgemm64_``), or None.
+# ---------------------------------------------------------------------- direct BLAS (gemm)
+def _find_cblas_gemm(kind: str):
+    """``cblas_?gemm`` (``kind`` = ``"d"`` or ``"s"``) of numpy's own OpenBLAS (ILP64
+    ``scipy_cblas_dgemm64_``), or None.
 
     Calling it directly lets the engine accumulate ``C += A·B`` in place (``beta = 1``) on
     sub-blocks with arbitrary leading dimensions, which ``np.matmul`` cannot do; the same
     library (and thread setting) as numpy's ``@`` is used.
     """
+    scalar = ctypes.c_double if kind == "d" else ctypes.c_float
     libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
     for path in libs:
-        for name, itype in (("scipy_cblas_dgemm64_", ctypes.c_int64), ("cblas_dgemm64_", ctypes.c_int64),
-                            ("scipy_cblas_dgemm", ctypes.c_int), ("cblas_dgemm", ctypes.c_int)):
+        for name, itype in ((f"scipy_cblas_{kind}gemm64_", ctypes.c_int64),
+                            (f"cblas_{kind}gemm64_", ctypes.c_int64),
+                            (f"scipy_cblas_{kind}gemm", ctypes.c_int), (f"cblas_{kind}gemm", ctypes.c_int)):
             try:
                 fn = getattr(ctypes.CDLL(path), name)
             except (OSError, AttributeError):
                 continue
             fn.restype = None
             fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
-                           ctypes.c_double, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
-                           ctypes.c_double, ctypes.c_void_p, itype]
+                           scalar, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
+                           scalar, ctypes.c_void_p, itype]
             return fn
     return None
 
 
-_CBLAS_DGEMM = _find_cblas_dgemm()
+_CBLAS = {np.dtype(np.float64): _find_cblas_gemm("d"), np.dtype(np.float32): _find_cblas_gemm("s")}
 _ROW, _NT, _T = 101, 111, 112
 
 
-def _check_gemm_works() -> bool:
-    if _CBLAS_DGEMM is None:
+def _check_gemm_works(dtype) -> bool:
+    fn = _CBLAS[np.dtype(dtype)]
+    if fn is None:
         return False
     try:
-        a = np.arange(6.0).reshape(2, 3)
-        b = np.arange(12.0).reshape(3, 4)
-        c = np.ones((2, 4))
-        _CBLAS_DGEMM(_ROW, _NT, _NT, 2, 4, 3, 2.0, a.ctypes.data, 3, b.ctypes.data, 4, 1.0,
-                     c.ctypes.data, 4)
+        a = np.arange(6.0, dtype=dtype).reshape(2, 3)
+        b = np.arange(12.0, dtype=dtype).reshape(3, 4)
+        c = np.ones((2, 4), dtype=dtype)
+        fn(_ROW, _NT, _NT, 2, 4, 3, 2.0, a.ctypes.data, 3, b.ctypes.data, 4, 1.0,
+           c.ctypes.data, 4)
         return bool(np.array_equal(c, 1.0 + 2.0 * (a @ b)))
     except Exception:  # pragma: no cover - defensive: fall back to numpy
         return False
 
 
-#: Whether the in-place ``gemm`` path is available (otherwise numpy ``matmul`` + add).
-HAVE_GEMM = _check_gemm_works()
+#: Whether the in-place ``gemm`` path is available per dtype (otherwise numpy ``matmul`` + add).
+HAVE_GEMM_FOR = {dt: _check_gemm_works(dt) for dt in _CBLAS}
+#: Whether the in-place float64 ``gemm`` path is available (tests switch it off).
+HAVE_GEMM = HAVE_GEMM_FOR[np.dtype(np.float64)]
 
 
 def gemm(alpha: float, A: np.ndarray, B: np.ndarray, beta: float, C: np.ndarray,
          trans_a: bool = False, trans_b: bool = False) -> None:
     """``C ← α·op(A)·op(B) + β·C`` in place, ``op(X) = X`` or ``Xᵀ``.
 
-    ``A``, ``B``, ``C`` are float64 arrays with unit stride along their last axis (row-major
+    ``A``, ``B``, ``C`` are arrays of one dtype, float64 (``dgemm``) or float32 (``sgemm``,
+    the engine's ``precision="mixed"``), with unit stride along their last axis (row-major
     blocks of larger arrays are fine). Falls back to numpy when the direct BLAS is missing.
     """
     m, k = A.shape[::-1] if trans_a else A.shape
@@ -147,8 +154,11 @@ def gemm(alpha: float, A: np.ndarray, B: np.ndarray, beta: float, C: np.ndarray,
         raise ValueError(f"gemm: incompatible shapes op(A) {(m, k)}, op(B) {(kb, n)}, C {C.shape}")
     if m == 0 or n == 0:
         return
-    if (not HAVE_GEMM or k == 0 or A.strides[-1] != 8 or B.strides[-1] != 8
-            or C.strides[-1] != 8 or C.dtype != np.float64):
+    dt = C.dtype
+    isz = dt.itemsize
+    fast = (HAVE_GEMM if dt == np.float64 else HAVE_GEMM_FOR.get(dt, False))
+    if (not fast or k == 0 or A.dtype != dt or B.dtype != dt or A.strides[-1] != isz
+            or B.strides[-1] != isz or C.strides[-1] != isz):
         prod = (A.T if trans_a else A) @ (B.T if trans_b else B)
         if beta == 0.0:
             np.multiply(prod, alpha, out=C)
@@ -157,7 +167,7 @@ def gemm(alpha: float, A: np.ndarray, B: np.ndarray, beta: float, C: np.ndarray,
                 C *= beta
             C += alpha * prod if alpha != 1.0 else prod
         return
-    _CBLAS_DGEMM(_ROW, _T if trans_a else _NT, _T if trans_b else _NT, m, n, k, alpha,
-                 A.__array_interface__["data"][0], max(A.strides[0] // 8, A.shape[1], 1),
-                 B.__array_interface__["data"][0], max(B.strides[0] // 8, B.shape[1], 1), beta,
-                 C.__array_interface__["data"][0], max(C.strides[0] // 8, C.shape[1], 1))
+    _CBLAS[dt](_ROW, _T if trans_a else _NT, _T if trans_b else _NT, m, n, k, alpha,
+               A.__array_interface__["data"][0], max(A.strides[0] // isz, A.shape[1], 1),
+               B.__array_interface__["data"][0], max(B.strides[0] // isz, B.shape[1], 1), beta,
+               C.__array_interface__["data"][0], max(C.strides[0] // isz, C.shape[1], 1))

@@ -295,10 +295,21 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         if not adaptive:
             table = TABLES["euler" if method == "euler_maruyama" else method]
+            # one-stage methods update the (private) state in place through one scratch
+            # array: the same rounding as x + dt·dx, no fresh multi-megabyte array per step
+            tmp = np.empty_like(x) if table.stages == 1 else None
             j = 1
             for n in range(1, n_steps + 1):
                 tn = t0 + (n - 1) * dt
-                x, v = _rk_step(f, table, tn, x, v, dt)
+                if tmp is not None:
+                    dx, dv = f(tn, x, v)
+                    np.multiply(dx, dt, out=tmp)     # dx may be v itself: x first, then v
+                    x += tmp
+                    if v is not None:
+                        np.multiply(dv, dt, out=tmp)
+                        v += tmp
+                else:
+                    x, v = _rk_step(f, table, tn, x, v, dt)
                 if rng is not None:
                     dX, dV = scene.noise_increment(rng, n_agents, dim, dt)
                     if dX is not None:
