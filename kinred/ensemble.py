@@ -281,8 +281,19 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
 
 
 def _worker_init() -> None:
-    """Initializer of worker processes: one thread for BLAS/OpenMP/numba."""
+    """Initializer of worker processes: one thread for BLAS/OpenMP/numba; on Linux the
+    worker is also terminated when its parent dies (a killed run leaves no orphan still
+    computing its member)."""
     os.environ.update(THREAD_ENV)
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)   # PR_SET_PDEATHSIG = 1
+        except Exception:  # pragma: no cover - best effort
+            pass
     numba = sys.modules.get("numba")
     if numba is not None:  # already imported (e.g. by unpickling): limit it explicitly
         try:

@@ -34,7 +34,8 @@ def test_result_folder_complete(smoke):
         assert folder.read_bytes(f"cost_{study}.png").startswith(b"\x89PNG")
     assert validate_report_html(folder.read_text("report.html")) == 5
     data = folder.read_json("cost.json")
-    assert set(data["headline"]) == {"projection", "recovery", "quantization", "integrators", "w1"}
+    assert set(data["headline"]) == {"projection", "precision", "recovery", "quantization",
+                                     "integrators", "w1"}
     assert data["machine"]["cores"] >= 1 and data["wall_time_s"] > 0
     summary = folder.read_json("summary.json")
     assert summary["study"] == "cost" and summary["headline"]["quantization"].startswith("the delayed")
@@ -55,6 +56,23 @@ def test_projection_error_decreases_with_k(smoke):
         for r in rs:
             assert r["error_max"] >= r["error_final"] - 1e-15
             assert 0.0 <= r["verdict_agreement"] <= 1.0 and r["time_s"] > 0
+
+
+def test_precision_knob_is_priced(smoke):
+    result, _ = smoke
+    fm = result.studies["projection"]["full_mixed"]
+    # float32 pair sums: a small but nonzero trajectory error, the same verdict
+    g_full = result.studies["projection"]["full"]["gamma_T"]
+    assert 0.0 < fm["error_max"] < 1e-4, fm
+    # Gamma(T) agrees relatively unless both runs sit at float64's round-off floor
+    assert fm["gamma_rel_diff"] < 1e-3 or g_full < 1e-28, (fm, g_full)
+    assert fm["agrees"] and fm["time_s"] > 0
+    assert "precision='mixed'" in result_headline(result)
+
+
+def result_headline(result):
+    from kinred.experiments.cost import headline
+    return headline(result.studies, result.config)["precision"]["text"]
 
 
 def test_recovery_improves_with_L(smoke):

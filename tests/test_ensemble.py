@@ -333,6 +333,49 @@ def test_killed_run_resumes_without_recomputing(tmp_path):
     assert (store / "summary.json").exists()
 
 
+_ORPHAN_SCRIPT = textwrap.dedent("""
+    import os, sys, time
+    import multiprocessing, concurrent.futures as cf
+    from kinred.ensemble import _worker_init
+
+    def member(path):
+        with open(path, "w") as fh:
+            fh.write(str(os.getpid()))
+        time.sleep(120)
+
+    if __name__ == "__main__":
+        pool = cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=_worker_init)
+        pool.submit(member, sys.argv[1])
+        while not os.path.exists(sys.argv[1]) or not open(sys.argv[1]).read():
+            time.sleep(0.05)
+        os.kill(os.getpid(), 9)            # the run is killed mid-member
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux-only")
+def test_killed_run_leaves_no_orphan_worker(tmp_path):
+    import time
+
+    script = tmp_path / "orphan.py"
+    script.write_text(_ORPHAN_SCRIPT)
+    pidfile = tmp_path / "worker.pid"
+    proc = subprocess.run([sys.executable, str(script), str(pidfile)], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    pid = int(pidfile.read_text())
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(pid, signal.SIGKILL)
+        pytest.fail("the worker outlived its killed parent")
+
+
 # ----------------------------------------------------------------------------------------------
 # Validation
 # ----------------------------------------------------------------------------------------------

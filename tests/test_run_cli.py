@@ -126,6 +126,14 @@ def test_config_errors_directly():
         kinetic_run.config_from_dict({**kinetic_run.SMALL_SCENE, "quantize": {}})
     with pytest.raises(ConfigError, match="not found"):
         kinetic_run.load_config("/nonexistent/scene.toml")
+    dyn = dict(kinetic_run.SMALL_SCENE["dynamics"])
+    with pytest.raises(ConfigError, match="dynamics.precision: must be 'double' or 'mixed'"):
+        kinetic_run.config_from_dict({**kinetic_run.SMALL_SCENE,
+                                      "dynamics": {**dyn, "precision": "single"}})
+    cfg = kinetic_run.config_from_dict({**kinetic_run.SMALL_SCENE,
+                                        "dynamics": {**dyn, "precision": "mixed"}})
+    assert cfg.scene().precision == "mixed" and cfg.to_json()["precision"] == "mixed"
+    assert kinetic_run.config_from_dict(kinetic_run.SMALL_SCENE).scene().precision == "double"
 
 
 def _cli_cmd(args):

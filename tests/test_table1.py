@@ -48,7 +48,7 @@ def test_quick_table1_reproduces_the_papers_pattern(quick_run):
 
 def test_quick_table1_writes_its_result_folder(quick_run):
     out, res = quick_run
-    assert res["coupling"] == "normalize='sum', G=4.0"
+    assert res["coupling"] == "normalize='sum', G=4.0" and res["precision"] == "mixed"
     assert res["paper"]["1.62"]["25"] == {"pos": 1, "neg": 1, "n/a": 18}
     html = (out / "report.html").read_text()
     assert validate_report_html(html) == 3
@@ -63,6 +63,24 @@ def test_config_validation():
         Table1Config(normalize="median")
     with pytest.raises(InvalidInput, match="G must be > 0"):
         Table1Config(G=0.0)
+    with pytest.raises(InvalidInput, match="precision"):
+        Table1Config(precision="single")
+    assert Table1Config().precision == "mixed"
+
+
+def test_mixed_precision_table_equals_double_member_by_member():
+    # the default precision ("mixed": float32 pair sums) against float64, on a reduced study
+    from kinred.experiments import table1
+
+    kw = dict(N=100, G=8.0, ks=(25, 5), n_projections=3, betas=(1.5, 1.62), record_every=50)
+    res = {p: table1.run(Table1Config.quick(precision=p, **kw), executor="serial", progress=False)
+           for p in ("mixed", "double")}
+    assert res["mixed"].counts == res["double"].counts
+    for b, per_dim in res["double"].gamma.items():
+        for dim, gd in per_dim.items():
+            gm = res["mixed"].gamma[b][dim]
+            mask = gd > 1e-30          # above float64's own round-off floor of the velocities
+            assert np.all(np.abs(gm[mask] - gd[mask]) <= 1e-3 * gd[mask]), (b, dim)
 
 
 def test_format_table_layout():

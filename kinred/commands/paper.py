@@ -33,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     _add_common(t1, "kinred-results/table1")
     t1.add_argument("--N", type=int, default=None, help="number of agents (default 1000; quick 200)")
     t1.add_argument("--projections", type=int, default=None, help="projections per k")
+    t1.add_argument("--precision", choices=("mixed", "double"), default=None,
+                    help="pair sums in float32 with float64 state (mixed, the default: about "
+                         "half the time, same verdicts) or everything in float64 (double)")
     f4 = sub.add_parser("fig4", help="Figure 4 of §3.4.2")
     f4.add_argument("--out", default="kinred-results/fig4", help="result folder (default: %(default)s)")
     f4.add_argument("--quick", action="store_true", help="reduced sizes (N = d = 100)")
@@ -61,11 +64,14 @@ def _table1(args) -> int:
         over["n_projections"] = args.projections
     if args.seed is not None:
         over["seed"] = args.seed
+    if args.precision is not None:
+        over["precision"] = args.precision
     cfg = table1.Table1Config.quick(**over) if args.quick else table1.Table1Config(**over)
     res = table1.run(cfg, out_dir=args.out, executor=args.executor, workers=args.workers,
                      scheduler=args.scheduler, resume=args.resume, progress=not args.no_progress)
     print(table1.format_table(res.counts, title=f"Table 1 (kinred; coupling normalize="
-                                                f"{cfg.normalize!r}, G={cfg.G:g})"))
+                                                f"{cfg.normalize!r}, G={cfg.G:g}, "
+                                                f"precision={cfg.precision})"))
     print()
     print(table1.format_table({b: v for b, v in table1.PAPER_TABLE1.items() if b in res.counts},
                               title="Table 1 (paper)"))

@@ -16,7 +16,9 @@ numbers in a table:
     does not shrink it); reported at the final time and as the maximum over saved times,
     together with the agreement of the flocking verdict (the paper's rule on Γ(T), §3.4.1)
     with the full simulation's. The time of a projected run includes drawing ``M`` and
-    projecting the initial data.
+    projecting the initial data. The full simulation is also run with
+    ``precision="mixed"`` (float32 pair sums, float64 state): its time and its error against
+    the float64 run (same formula with ``M = I``) price the engine's precision knob.
 ``recovery``
     The setting of the paper's Figure 4 right (§3.4.2): initial data with 80 % zero entries,
     ``L`` independent projections into ℝᵏ (eq. (3.17), label ``eq:paral1``), and the
@@ -295,6 +297,18 @@ def _study_projection(cfg: CostConfig, bar) -> dict:
     bar.update(1)
     g_full = float(full.observables["gamma"][-1])
     verdict_full = flocking_verdict(g_full)
+    # the precision knob: the same full run with float32 pair sums
+    scene_mixed = Scene(scene.effects, normalize="sum", precision="mixed")
+    simulate(scene_mixed, x0, v0, warm, cfg.proj_dt, save=save)
+    mixed, t_mixed = _clock(lambda: simulate(scene_mixed, x0, v0, (0.0, T), cfg.proj_dt,
+                                             save=save))
+    err_mixed = _spread_relative(mixed.x, full.x)
+    g_mixed = float(mixed.observables["gamma"][-1])
+    full_mixed = dict(time_s=t_mixed, error_final=float(err_mixed[-1]),
+                      error_max=float(err_mixed.max()), gamma_T=g_mixed,
+                      gamma_rel_diff=abs(g_mixed - g_full) / g_full if g_full else 0.0,
+                      agrees=flocking_verdict(g_mixed) == verdict_full,
+                      speedup=t_full / t_mixed)
     rows = []
     for kind in cfg.proj_kinds:
         for k in cfg.proj_ks:
@@ -334,7 +348,7 @@ def _study_projection(cfg: CostConfig, bar) -> dict:
                              error="spread-relative trajectory error of positions, "
                                    "(sum_i |y_i - M x_i|^2 / sum_i |M x_i - M xbar|^2)^(1/2)"),
                 full=dict(time_s=t_full, gamma_T=g_full, verdict=verdict_full),
-                runs=rows, summary=summary)
+                full_mixed=full_mixed, runs=rows, summary=summary)
 
 
 def _study_recovery(cfg: CostConfig, bar) -> dict:
@@ -576,6 +590,17 @@ def headline(studies: dict, cfg: CostConfig) -> dict:
                   f"{r['speedup']:.1f}x less time than d = {p['setting']['d']} "
                   f"(N = {p['setting']['N']}, {p['setting']['steps']} Euler steps); "
                   f"flocking verdict agrees in {100 * r['verdict_agreement']:.0f}% of runs"))
+        fm = p.get("full_mixed")
+        if fm:
+            out["precision"] = dict(
+                speedup=fm["speedup"], error_max=fm["error_max"],
+                gamma_rel_diff=fm["gamma_rel_diff"],
+                text=(f"precision='mixed' (float32 pair sums) runs the full d = "
+                      f"{p['setting']['d']} simulation {fm['speedup']:.2g}x faster at "
+                      f"{fm['error_max']:.1e} relative trajectory error (max over time); "
+                      + (f"{fm['gamma_rel_diff']:.1e} relative change of Gamma(T)"
+                         if p["full"]["gamma_T"] > 1e-28 else
+                         "Gamma(T) at float64's round-off floor (< 1e-28) in both")))
     g = studies.get("integrators")
     if g:
         def t_of(m, e):
@@ -707,6 +732,10 @@ def _fig_projection(p: dict, plt):
     _front(ax, alls_t, alls_e)
     ax.axvline(p["full"]["time_s"], color="k", ls="--", lw=1,
                label=f"full d={p['setting']['d']}: {p['full']['time_s']:.2g} s")
+    fm = p.get("full_mixed")
+    if fm and fm["error_max"] > 0:
+        ax.loglog([fm["time_s"]], [fm["error_max"]], "k*", ms=10,
+                  label=f"full, precision='mixed': {fm['time_s']:.2g} s (max error)")
     ax.set_xlabel("wall time of one simulation [s]")
     ax.set_ylabel("relative trajectory error (positions)")
     ax.set_title(f"projected dimension k: N={p['setting']['N']}, d={p['setting']['d']}")
@@ -846,6 +875,10 @@ def _tables(result: CostResult):
     if "projection" in s:
         p = s["projection"]
         rows = [["full", p["setting"]["d"], p["full"]["time_s"], 0.0, 0.0, 100.0, 1.0]]
+        fm = p.get("full_mixed")
+        if fm:
+            rows.append(["full, precision mixed", p["setting"]["d"], fm["time_s"],
+                         fm["error_final"], fm["error_max"], 100.0 * fm["agrees"], fm["speedup"]])
         rows += [[r["kind"], r["k"], r["time_s"], r["error_final"], r["error_max"],
                   100 * r["verdict_agreement"], r["speedup"]] for r in p["summary"]]
         out["projection"] = Table(["kind", "k", "time [s]", "error at T", "max error",

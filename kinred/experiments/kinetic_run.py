@@ -60,7 +60,7 @@ _SCHEMA = {
          "dynamics": (dict, True), "initial": (dict, True), "quantize": (dict, True),
          "projection": (dict, True), "integrate": (dict, True), "output": (dict, False),
          "smoke": (dict, False)},
-    "dynamics": {"d": (int, True), "effect": (list, True)},
+    "dynamics": {"d": (int, True), "effect": (list, True), "precision": (str, False)},
     "initial": {"positions": (dict, False), "velocities": (dict, False), "phase": (dict, False),
                 "lift_to": (int, False),
                 "lift_seed": (int, False)},
@@ -143,6 +143,7 @@ class Config:
     lift_seed: int
     data: dict = field(repr=False, default_factory=dict)
     smoke: bool = False
+    precision: str = "double"
 
     def to_json(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in ("data",)}
@@ -174,7 +175,7 @@ class Config:
                 effects.append(SelfPropulsion(p["a"], p["b"]))
             else:  # free transport: x' = v, v' = 0
                 effects.append(Drift(np.zeros(self.d)))
-        return Scene(effects, normalize="mean")
+        return Scene(effects, normalize="mean", precision=getattr(self, "precision", "double"))
 
     def initial_measure(self):
         """The phase-space measure ``μ₀`` on ``ℝ²ᵈ`` (lifted when ``lift_to`` is set)."""
@@ -239,6 +240,10 @@ def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False
                 if key == "atoms":
                     dest.pop("eps", None)
     d = dyn["d"]
+    precision = dyn.get("precision", "double")
+    if precision not in ("double", "mixed"):
+        raise ConfigError(f"{source}: dynamics.precision: must be 'double' or 'mixed', got "
+                          f"{precision!r}")
     if d < 1:
         raise ConfigError(f"{source}: dynamics.d: must be >= 1, got {d}")
     effects = []
@@ -325,7 +330,7 @@ def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False
                   ks=tuple(int(k) for k in ks), kind=kind, projection_seed=pr.get("seed", 0),
                   method=method, dt=dt, t_final=tf, save_every=int(save_every), yes_below=yes,
                   no_above=no, lift_to=lift_to, lift_seed=ini.get("lift_seed", 0), data=clean,
-                  smoke=smoke)
+                  smoke=smoke, precision=precision)
 
 
 class _Stub:
