@@ -4,7 +4,8 @@ Times, in one process, forward-Euler Cucker–Smale runs (β = 1.5 and 1.62, ``n
 G = 0.8, h = 0.02) at (N, d) = (1000, 200) full and (1000, 10) projected against
 ``../shared/reference/cucker_smale_numpy.py`` (imported from its path, never copied), prints
 both times, their ratio and the largest relative Γ(t) difference while Γ > 1e-8 (before
-flocking), then a self-propulsion-only scene against an alignment scene at the same N, d, and
+flocking), the same for ``precision="mixed"`` (float32 pair sums, float64 state: what the
+lower accuracy buys), then a self-propulsion-only scene against an alignment scene at the same N, d, and
 single-threaded per-step times at k = 2, 5, 10, 25, 50, 100, 150, 200 (process CPU time, less
 sensitive to other load than wall time) and the resulting estimate of the full Table 1 run
 (423 simulations of 1500 steps on 2 single-threaded workers).
@@ -46,23 +47,27 @@ def run_pair(base, x0, v0, beta, steps, G, label):
     tb, gb = base.simulate(x0, v0, beta=beta, G=G, normalize="sum", h=0.02, steps=steps,
                            record_every=50)
     t_base = time.perf_counter() - t
-    scene = Scene([Alignment(CuckerSmale(G=G, beta=beta))], normalize="sum")
-    tr = simulate(scene, x0, v0, (0.0, steps * 0.02), 0.02, save=SaveAt(every=50,
-                  observables=("gamma",)))
-    t_ours = tr.wall_time
-    g = tr.observables["gamma"]
-    mask = gb > 1e-8
-    rel = float(np.max(np.abs(g[mask] - gb[mask]) / gb[mask])) if mask.any() else float("nan")
-    print(f"{label:34s} beta={beta:<5} baseline {t_base:7.2f} s  kinred {t_ours:7.2f} s  "
-          f"ratio {t_base / t_ours:5.2f}x  max rel dGamma (Gamma>1e-8) {rel:.2e}  "
-          f"Gamma(T) {g[-1]:.2e} vs {gb[-1]:.2e}")
+    for precision in ("double", "mixed"):
+        scene = Scene([Alignment(CuckerSmale(G=G, beta=beta))], normalize="sum",
+                      precision=precision)
+        tr = simulate(scene, x0, v0, (0.0, steps * 0.02), 0.02, save=SaveAt(every=50,
+                      observables=("gamma",)))
+        t_ours = tr.wall_time
+        g = tr.observables["gamma"]
+        mask = gb > 1e-8
+        rel = float(np.max(np.abs(g[mask] - gb[mask]) / gb[mask])) if mask.any() else float("nan")
+        name = label if precision == "double" else "  same, precision='mixed'"
+        print(f"{name:34s} beta={beta:<5} baseline {t_base:7.2f} s  kinred {t_ours:7.2f} s  "
+              f"ratio {t_base / t_ours:5.2f}x  max rel dGamma (Gamma>1e-8) {rel:.2e}  "
+              f"Gamma(T) {g[-1]:.2e} vs {gb[-1]:.2e}")
 
 
-def per_step(N, k, steps, beta=1.62, repeat=3):
+def per_step(N, k, steps, beta=1.62, repeat=3, precision="double"):
     """Single-threaded ms per Euler step (minimum over ``repeat`` runs of CPU time)."""
     rng = np.random.default_rng(3)
     x0, v0 = rng.uniform(0, 1, (N, k)), rng.uniform(-1, 1, (N, k))
-    scene = Scene([Alignment(CuckerSmale(G=0.8, beta=beta))], normalize="sum")
+    scene = Scene([Alignment(CuckerSmale(G=0.8, beta=beta))], normalize="sum",
+                  precision=precision)
     best = float("inf")
     for _ in range(repeat):
         c0 = time.process_time()
@@ -98,21 +103,27 @@ def main(argv=None):
 
     old = get_num_threads()
     set_num_threads(1)
-    times = {}
+    times = {"double": {}, "mixed": {}}
     try:
         ns = min(steps, 100)
         with _threads.blas_threads(1):
             for kk in (2, 5, 10, 25, 50, 100, 150, 200):
-                t15, t162 = per_step(N, kk, ns, 1.5), per_step(N, kk, ns, 1.62)
-                times[kk] = max(t15, t162)
-                print(f"single-threaded per-step time (CPU), N=1000, k={kk:3d}: "
-                      f"beta=1.5 {t15:6.2f} ms, beta=1.62 {t162:6.2f} ms")
+                for prec in ("double", "mixed"):
+                    t15 = per_step(N, kk, ns, 1.5, precision=prec)
+                    t162 = per_step(N, kk, ns, 1.62, precision=prec)
+                    times[prec][kk] = (t15, t162)
+                    print(f"single-threaded per-step time (CPU), N=1000, k={kk:3d}, {prec:6s}: "
+                          f"beta=1.5 {t15:6.2f} ms, beta=1.62 {t162:6.2f} ms")
     finally:
         set_num_threads(old)
-    proj = sum(times[kk] for kk in (150, 100, 50, 25, 10, 5, 2))
-    total = (times[200] + 20 * proj) * 1500 * 3 / 2 / 1e3
-    print(f"sum over projected k of per-step times: {proj:.1f} ms; estimated Table 1 run "
-          f"(423 x 1500 steps, 2 single-threaded workers): {total:.0f} s = {total / 60:.1f} min")
+    for prec, tt in times.items():
+        # beta = 1.7 costs what 1.62 costs (the same ufunc chain)
+        per_beta = [sum(tt[kk][i] for kk in (150, 100, 50, 25, 10, 5, 2)) for i in (0, 1, 1)]
+        orig = [tt[200][i] for i in (0, 1, 1)]
+        total = sum(o + 20 * p for o, p in zip(orig, per_beta)) * 1500 / 2 / 1e3
+        print(f"{prec}: sum over projected k of per-step times {per_beta[0]:.1f} ms (beta=1.5), "
+              f"{per_beta[1]:.1f} ms (1.62); estimated Table 1 run (423 x 1500 steps, "
+              f"2 single-threaded workers): {total:.0f} s = {total / 60:.1f} min")
 
 
 if __name__ == "__main__":
