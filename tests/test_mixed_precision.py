@@ -93,6 +93,8 @@ def test_mixed_flocking_run_follows_double_down_to_1e_30():
 def test_mixed_projects_and_validates():
     sc = Scene([Alignment(CuckerSmale())], precision="mixed")
     assert sc.project(np.eye(2, 3)).precision == "mixed"
+    from kinred.kinetic._solution import weighted_scene
+    assert weighted_scene(sc, np.full(4, 0.25)).precision == "mixed"
     assert "precision='mixed'" in repr(sc)
     with pytest.raises(InvalidInput, match="precision"):
         Scene([Alignment(CuckerSmale())], precision="half")

@@ -152,7 +152,7 @@ def weighted_scene(scene, weights):
 
     scene = _check_scene(scene)
     return Scene(scene.effects, normalize=scene.normalize, weights=weights, block=scene.block,
-                 engine=scene.engine)
+                 engine=scene.engine, precision=scene.precision)
 
 
 def _save_spec(t_span, dt, method, times, save_every):
