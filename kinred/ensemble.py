@@ -280,20 +280,24 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
     return ("ok", index, out, time.perf_counter() - t0)
 
 
+def _exit_with_parent() -> None:
+    """Block until the parent process is gone, then end this worker (daemon thread)."""
+    import multiprocessing
+
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        parent.join()           # waits on the parent's sentinel: portable, no polling
+        os._exit(1)
+
+
 def _worker_init() -> None:
-    """Initializer of worker processes: one thread for BLAS/OpenMP/numba; on Linux the
-    worker is also terminated when its parent dies (a killed run leaves no orphan still
+    """Initializer of worker processes: one thread for BLAS/OpenMP/numba, and a watcher
+    thread that ends the worker when its parent dies (a killed run leaves no orphan still
     computing its member)."""
     os.environ.update(THREAD_ENV)
-    if sys.platform.startswith("linux"):
-        try:
-            import ctypes
-            import signal
+    import threading
 
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)   # PR_SET_PDEATHSIG = 1
-        except Exception:  # pragma: no cover - best effort
-            pass
+    threading.Thread(target=_exit_with_parent, name="kinred-parent-watch", daemon=True).start()
     numba = sys.modules.get("numba")
     if numba is not None:  # already imported (e.g. by unpickling): limit it explicitly
         try:

@@ -353,7 +353,6 @@ _ORPHAN_SCRIPT = textwrap.dedent("""
 """)
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux-only")
 def test_killed_run_leaves_no_orphan_worker(tmp_path):
     import time
 

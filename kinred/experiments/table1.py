@@ -136,7 +136,7 @@ def member(params: dict, seed) -> dict:
 
     x0, v0 = initial_data(params["N"], params["d"], params["data_seed"])
     scene = Scene([Alignment(kernel=CuckerSmale(G=params["G"], beta=params["beta"]))],
-                  normalize=params["normalize"], precision=params.get("precision", "double"))
+                  normalize=params["normalize"], precision=params["precision"])
     if params["k"]:
         M = jl_matrix(params["k"], params["d"], kind=params["kind"], seed=seed)
         scene = scene.project(M)
