@@ -89,6 +89,21 @@ def pool(n: int) -> ThreadPoolExecutor:
 
 
 # ---------------------------------------------------------------------- direct BLAS (gemm)
+def cblas_gemm_symbol(kind: str):
+    """``(library path, symbol, ilp64)`` of ``cblas_?gemm`` (``kind`` = ``"d"`` or ``"s"``) in
+    numpy's own OpenBLAS (ILP64 ``scipy_cblas_dgemm64_`` first), or None."""
+    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
+    for path in libs:
+        for name, ilp64 in ((f"scipy_cblas_{kind}gemm64_", True), (f"cblas_{kind}gemm64_", True),
+                            (f"scipy_cblas_{kind}gemm", False), (f"cblas_{kind}gemm", False)):
+            try:
+                getattr(ctypes.CDLL(path), name)
+            except (OSError, AttributeError):
+                continue
+            return os.path.abspath(path), name, ilp64
+    return None
+
+
 def _find_cblas_gemm(kind: str):
     """``cblas_?gemm`` (``kind`` = ``"d"`` or ``"s"``) of numpy's own OpenBLAS (ILP64
     ``scipy_cblas_dgemm64_``), or None.
@@ -98,21 +113,17 @@ def _find_cblas_gemm(kind: str):
     library (and thread setting) as numpy's ``@`` is used.
     """
     scalar = ctypes.c_double if kind == "d" else ctypes.c_float
-    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
-    for path in libs:
-        for name, itype in ((f"scipy_cblas_{kind}gemm64_", ctypes.c_int64),
-                            (f"cblas_{kind}gemm64_", ctypes.c_int64),
-                            (f"scipy_cblas_{kind}gemm", ctypes.c_int), (f"cblas_{kind}gemm", ctypes.c_int)):
-            try:
-                fn = getattr(ctypes.CDLL(path), name)
-            except (OSError, AttributeError):
-                continue
-            fn.restype = None
-            fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
-                           scalar, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
-                           scalar, ctypes.c_void_p, itype]
-            return fn
-    return None
+    found = cblas_gemm_symbol(kind)
+    if found is None:
+        return None
+    path, name, ilp64 = found
+    itype = ctypes.c_int64 if ilp64 else ctypes.c_int
+    fn = getattr(ctypes.CDLL(path), name)
+    fn.restype = None
+    fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
+                   scalar, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
+                   scalar, ctypes.c_void_p, itype]
+    return fn
 
 
 _CBLAS = {np.dtype(np.float64): _find_cblas_gemm("d"), np.dtype(np.float32): _find_cblas_gemm("s")}

@@ -51,6 +51,7 @@ A scene without pairwise effects costs ``O(N·d)`` per evaluation.
 from __future__ import annotations
 
 import threading
+from concurrent.futures import wait
 from typing import Sequence
 
 import numpy as np
@@ -67,6 +68,11 @@ __all__ = ["Scene", "project_state"]
 #: Dimensions up to which distances are computed by differences (numba, vectorized over
 #: columns) rather than by the Gram product plus fix-up.
 _SMALL_K = 3
+
+#: Whether the engine runs a thread's strip loop as one compiled call when every pairwise
+#: kernel has a compiled form (``kernel._compiled``); tests switch it off to compare with the
+#: Python strip loop, which remains the path for any other kernel.
+_USE_COMPILED = True
 
 #: Target number of pairwise entries per strip: ≈ 512 kB of float64 for small dimensions (the
 #: block stays in L2 for the elementwise kernel passes) and 2× more from ``_BIG_K`` on, where
@@ -338,14 +344,21 @@ class Scene:
         def make():
             nbytes = (8 * n * dim * len(need_centred) + ft.itemsize * (
                 n * dim * len(gram) + n * (dim + 1) * len(carriers)
-                + nthreads * (n * (dim + 1) * len(keys) + maxel * (1 + need_phi))))
+                + nthreads * (n * (dim + 1) * len(keys) + maxel * (1 + need_phi)))
+                + 24 * n * nthreads)
+            acc3 = [np.empty((len(keys), n, dim + 1), ft) for _ in range(nthreads)]
             return {
                 "centred": {key: np.empty((n, dim)) for key in need_centred},
                 "single": {key: np.empty((n, dim), ft) for key in gram},
                 "zext": {key: np.empty((n, dim + 1), ft) for key in carriers},
-                "acc": [{kk: np.empty((n, dim + 1), ft) for kk in keys} for _ in range(nthreads)],
+                # per thread: accumulators (one (n, dim+1) block per (target, carrier)),
+                # distance block, second kernel block, scratch rows of the compiled kernels
+                "acc3": acc3,
+                "acc": [{kk: A[i] for i, kk in enumerate(keys)} for A in acc3],
                 "q": [np.empty(maxel, ft) for _ in range(nthreads)],
-                "phi": [np.empty(maxel, ft) if need_phi else None for _ in range(nthreads)],
+                "phi": [np.empty(maxel, ft) if need_phi else np.empty(1, ft)
+                        for _ in range(nthreads)],
+                "scr": [np.empty((3, n)) for _ in range(nthreads)],
             }, nbytes
 
         ws = _scratch((n, dim, tuple(need_centred), tuple(carriers), tuple(keys), nthreads,
@@ -372,7 +385,48 @@ class Scene:
                           (self._tgt(e), e.carrier)) for e in self._pair if e.source == s]
                      for s in sources}
 
+        compiled = (_USE_COMPILED and _kernels.HAVE_COMPILED_FOR.get(ft, False)
+                    and all(getattr(e.kernel, "_compiled", None) is not None for e in self._pair))
+        if compiled:
+            # the whole strip loop of a thread in one compiled call, without the GIL
+            # (_kernels.pair_strips: the same operations as ``work`` below)
+            small = dim <= _SMALL_K
+            srcs = {s: i for i, s in enumerate(sources)}
+            stack = (lambda arrs: arrs[0][None] if len(arrs) == 1 else np.stack(arrs))
+            if small:
+                YT = stack([geo[s][0] for s in sources])
+                Yg = np.empty((len(sources), 0, 0), ft)
+                nrm = np.empty((len(sources), 0), ft)
+                Rg = np.empty((len(sources), 0, 0))
+            else:
+                YT = np.empty((len(sources), 0, 0))
+                Yg = stack([geo[s][0] for s in sources])
+                nrm = stack([geo[s][1] for s in sources])
+                Rg = stack([np.ascontiguousarray(state[s]) for s in sources])
+            Zs = stack([zext[key] for key in carriers])
+            specs = [e.kernel._compiled for e in self._pair]
+            esrc = np.array([srcs[e.source] for e in self._pair], dtype=np.int64)
+            elast = np.zeros(len(self._pair), dtype=np.bool_)
+            for s in sources:
+                elast[max(i for i, e in enumerate(self._pair) if e.source == s)] = True
+            ekind = np.array([sp[0] for sp in specs], dtype=np.int64)
+            epar = np.array([[sp[1], sp[2]] for sp in specs], dtype=ft)
+            ez = np.array([carriers.index(e.carrier) for e in self._pair], dtype=np.int64)
+            eacc = np.array([keys.index((self._tgt(e), e.carrier)) for e in self._pair],
+                            dtype=np.int64)
+            tau = ft.type(_kernels.tau_for(dim, ft))
+
+            def cwork(g, my_strips):
+                with _threads.blas_threads(1):
+                    _kernels.pair_strips(np.array(my_strips, dtype=np.int64).reshape(-1, 2),
+                                         small, YT, Yg, nrm, Rg, tau, esrc, elast, ekind, epar,
+                                         ez, eacc, Zs, ws["acc3"][g], ws["q"][g], ws["phi"][g],
+                                         ws["scr"][g], ft.type(1.0))
+                return ws["acc"][g]
+
         def work(g, my_strips):
+            if compiled:
+                return cwork(g, my_strips)
             acc = ws["acc"][g]
             for A in acc.values():
                 A.fill(0.0)
@@ -417,8 +471,17 @@ class Scene:
                 g = loads.index(min(loads))
                 groups[g].append((i0, i1))
                 loads[g] += (i1 - i0) * (n - i0)
-            accs = list(_threads.pool(nthreads).map(work, range(nthreads),
-                                                    [sorted(gr) for gr in groups]))
+            # groups 1.. in the pool, group 0 in the calling thread (one wake-up less)
+            futs = [_threads.pool(nthreads - 1).submit(work, g, sorted(groups[g]))
+                    for g in range(1, nthreads)]
+            try:
+                acc0 = work(0, sorted(groups[0]))
+            finally:
+                wait(futs)      # never leave a thread writing into the shared buffers
+            accs = [acc0] + [f.result() for f in futs]
+        if compiled:
+            for s in sources:
+                _kernels.COUNTERS[s] += len(strips)
         out = {}
         for kk in keys:
             A = accs[0][kk]
