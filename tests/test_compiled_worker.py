@@ -1,12 +1,17 @@
 """The compiled strip worker (one GIL-free call per engine thread and step) and its
 vectorized power kernels, against long-double references and the Python strip loop."""
 
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene, _kernels
+from kinred.dynamics import _threads
 from kinred.dynamics import scene as scene_mod
 from kinred.dynamics._threads import num_threads
 
@@ -144,3 +149,51 @@ def test_kernels_without_compiled_form_use_the_python_loop(monkeypatch):
     assert not calls                        # Morse has no compiled form: Python strip loop
     ref = sc._pairwise_numpy(x, v)["v"]
     assert np.max(np.abs(got - ref)) <= 1e-12 * np.max(np.abs(ref))
+
+
+def test_blas_stays_single_threaded_inside_the_parallel_region(monkeypatch):
+    # numpy's OpenBLAS applies openblas_set_num_threads_local process-wide: a worker that
+    # restored the count on its way out used to switch the other worker's BLAS calls back to
+    # multithreading mid-step. Now the caller owns the setting for the whole region.
+    get = _threads._BLAS_GET
+    assert get is not None
+    seen = []
+    orig = _kernels.pair_strips
+
+    def spy(*args):
+        seen.append(get())
+        out = orig(*args)
+        seen.append(get())
+        return out
+
+    monkeypatch.setattr(_kernels, "pair_strips", spy)
+    before = get()
+    rng = np.random.default_rng(8)
+    x, v = rng.uniform(0, 1, (400, 30)), rng.uniform(-1, 1, (400, 30))
+    with num_threads(2):
+        for _ in range(5):
+            Scene([Alignment(CuckerSmale(0.8, 1.62))]).rhs(x, v)
+    assert len(seen) == 20 and set(seen) == {1}
+    assert get() == before
+
+
+def test_two_thread_steps_are_bitwise_reproducible():
+    # in a fresh process (the race showed in the first calls): 25 right-hand sides, both
+    # engine paths, must agree bit for bit
+    code = textwrap.dedent("""
+        import numpy as np
+        from kinred.dynamics import Alignment, CuckerSmale, Scene, set_num_threads
+        from kinred.dynamics import scene as scene_mod
+        set_num_threads(2)
+        rng = np.random.default_rng(0)
+        x, v = rng.uniform(0, 1, (1000, 200)), rng.uniform(-1, 1, (1000, 200))
+        sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], normalize="sum")
+        for compiled in (True, False):
+            scene_mod._USE_COMPILED = compiled
+            outs = [sc.rhs(x, v)[1].copy() for _ in range(25)]
+            assert all(np.array_equal(o, outs[0]) for o in outs), compiled
+        print("ok")
+    """)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr[-2000:]

@@ -15,6 +15,12 @@ Kernels
 ``sqdist_diff(YT, i0, i1, j0, out)``
     Squared distances by differences from transposed coordinates ``YT (k, N)``, vectorized
     over columns (the engine's path for ``k ≤ 3``). Twin: :func:`sqdist_numpy`.
+``pair_strips(strips, ...)``
+    The pairwise stage of one engine thread in one compiled call (Gram block by
+    ``cblas_?gemm`` of numpy's OpenBLAS, fix-up, kernel, both pair-sum products per strip).
+    Twin: the Python strip loop of ``Scene._pairwise`` (same operations, same order).
+``cs_pow(Q, G, beta, scr)`` (rows: ``pow_row64``, ``pow_row32``)
+    Cucker–Smale ``G (1 + q)^(−β)`` for general β without libm calls. Twin: :func:`cs_numpy`.
 ``cs_halfint(Q, G, n2, out)``
     Cucker–Smale kernel ``G (1 + q)^(−n2/2)`` for integer ``n2`` with sqrt and division only
     (``out`` may be ``Q``: a separate in-place kernel, since LLVM vectorizes a loop over two
@@ -29,13 +35,20 @@ divisions ≈ 1 ns even vectorized; kernels therefore evaluate transcendentals w
 cache-sized blocks and numba does only cheap arithmetic (``cs_halfint`` for ``2β ≤ 5``:
 0.87 ns per entry). A branch-free polynomial ``exp(−β log(1+q))`` in numba (bit casts,
 degree-11 ``atanh`` series and degree-13 Taylor, relative error ≤ 3e-16·(1 + β log(1+q)))
-vectorizes to 512-bit code on Zen 4 but is compute-bound at 2.6 ns per entry – no faster
-than the ufunc chain (measured twice, on both machines) – and was not kept.
+vectorizes to 512-bit code on Zen 4 but is compute-bound at 2.6–3.5 ns per entry – no faster
+than the ufunc chain (measured on both machines). It is now used (:func:`pow_row64`,
+:func:`pow_row32`) for another reason: inside the compiled strip worker
+(:func:`pair_strips`) it needs no Python call, and the GIL hand-offs it saves were the
+k = 10 step's real cost with two threads (see the section "compiled strip worker" below).
+Table-driven variants (64-entry ``2^(i/64)`` table and/or a 128-entry log table with
+degree-5/7 polynomials, no division) measured only 3.2 vs 3.5 ns: gathers cost what the
+saved multiply-adds did; not kept.
 
 A fused compiled loop for small dimensions (distances by differences, kernel and both
 orientations of the pair sum per row, no BLAS and no Python per strip) was measured at
 k = 10 and not kept: distances 1.3 ns and the two sums 2.3 ns per pair, i.e. no faster than
-the BLAS products it would replace (the engine's k = 10 step is ≈ 3.9 ns per pair in all).
+the BLAS products it would replace. The compiled strip worker keeps the BLAS products and
+calls them from numba instead.
 
 A dense variant of the d = 200 step (one threaded ``syrk`` for the whole Gram matrix, the
 kernel on N × N, one threaded ``gemm``) was measured against the strips at N = 1000 with 1

@@ -33,9 +33,34 @@ def _find_openblas_local():
 _BLAS_LOCAL = _find_openblas_local()
 
 
+def _find_openblas_get():
+    """``openblas_get_num_threads`` of numpy's OpenBLAS, or None (tests read it)."""
+    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
+    for path in libs:
+        for name in ("scipy_openblas_get_num_threads64_", "openblas_get_num_threads"):
+            try:
+                fn = getattr(ctypes.CDLL(path), name)
+            except (OSError, AttributeError):
+                continue
+            fn.restype = ctypes.c_int
+            return fn
+    return None
+
+
+_BLAS_GET = _find_openblas_get()
+
+
 @contextlib.contextmanager
 def blas_threads(n: int):
-    """Limit BLAS to ``n`` threads in the calling thread for the duration (if supported)."""
+    """Limit BLAS to ``n`` threads for the duration (if supported).
+
+    In numpy's OpenBLAS, ``openblas_set_num_threads_local`` acts on the whole process, not
+    on the calling thread (measured: a value set in one thread is read back in another).
+    Only the thread that owns a parallel region may therefore enter this context; its
+    workers call :func:`pin_blas_one`. (Two workers each entering it raced: the first to
+    finish restored the old count while the other still computed, whose later BLAS calls
+    then ran multithreaded – oversubscribed, and round-off that changed from call to call.)
+    """
     if _BLAS_LOCAL is None:
         yield
         return
@@ -44,6 +69,15 @@ def blas_threads(n: int):
         yield
     finally:
         _BLAS_LOCAL(int(prev))
+
+
+def pin_blas_one() -> None:
+    """In a worker of a parallel region: BLAS single-threaded, not restored. The region's
+    owner holds :func:`blas_threads` ``(1)`` around the region and restores the count after
+    every worker has finished; were the setting per thread, the pool threads are the
+    engine's own and stay at one."""
+    if _BLAS_LOCAL is not None:
+        _BLAS_LOCAL(1)
 
 
 def set_num_threads(n: int) -> None:

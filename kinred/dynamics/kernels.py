@@ -10,6 +10,11 @@ distances). Built-in kernels also provide
 
 Custom kernels without ``value_sq`` still work: the engine evaluates ``kernel(np.sqrt(q))``.
 
+A kernel with a ``_compiled`` attribute ``(kind, a, b)`` (kinds in ``_kernels``: Cucker–Smale
+half-integer and general β) is evaluated inside the engine's compiled strip worker, which
+runs a thread's whole share of the pairwise stage without the GIL; a scene whose pairwise
+kernels all have one uses it, any other scene the Python strip loop (same operations).
+
 Sign conventions (eq. (3.14), label ``DOrsogna2``, and eq. (4.3), label ``eq:dyn5``): a
 potential ``U`` acts on agent ``i`` by ``−∇_{xᵢ} U(‖xᵢ − xⱼ‖) = u(s)(xⱼ − xᵢ)`` with
 ``u(s) = U′(s)/s``, so the engine only ever needs the scalar ``u``.
@@ -73,9 +78,13 @@ class CuckerSmale:
         self.beta = as_float(beta, "beta", low=0.0)
         n2 = 2.0 * self.beta
         self._n2 = int(n2) if (n2 == int(n2) and n2 <= 5) else None
-        # the engine's compiled strip worker evaluates this kernel without Python
-        self._compiled = ((_kernels.KIND_CS_HALFINT, self.G, float(self._n2))
-                          if self._n2 is not None else (_kernels.KIND_CS_POW, self.G, self.beta))
+
+    @property
+    def _compiled(self):
+        """``(kind, a, b)`` for the engine's compiled strip worker (no Python per strip)."""
+        if self._n2 is not None:
+            return (_kernels.KIND_CS_HALFINT, self.G, float(self._n2))
+        return (_kernels.KIND_CS_POW, self.G, self.beta)
 
     def __call__(self, s):
         s = np.asarray(s, dtype=float)

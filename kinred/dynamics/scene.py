@@ -28,8 +28,9 @@ a block stays in L2):
    a BLAS Gram block ``−2 Y_I Y_Jᵀ`` of centred coordinates written straight into the strip,
    plus one numba pass that adds the norms and recomputes close pairs by differences
    (relative error ≤ 4e-13, see ``_kernels``);
-2. kernel values with numpy SIMD ufuncs in place on the block (the last effect of a source
-   overwrites the distances);
+2. kernel values in place on the block (the last effect of a source overwrites the
+   distances): compiled for kernels that have a compiled form (Cucker–Smale), else numpy
+   SIMD ufuncs (``value_sq``) or ``kernel(√q)``;
 3. two in-place BLAS products per strip, ``A_I += Φ_I,[i0:] Z_[i0:]`` and, by symmetry,
    ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` with ``Z = [c z, c]`` (``dgemm`` with ``β = 1`` on
    sub-blocks, no temporaries): one kernel block feeds both orientations, so every unordered
@@ -38,8 +39,13 @@ a block stays in L2):
    ``z`` centred (so velocity fluctuations near 1e-15 keep their relative accuracy).
 
 With ``n`` engine threads (:func:`~kinred.dynamics.set_num_threads`) the strips are dealt
-out to ``n`` Python threads (numba kernels and BLAS release the GIL; BLAS runs one thread
-per engine thread), each with its own accumulator.
+out to ``n`` threads (the calling thread and ``n − 1`` pooled ones; BLAS runs one thread per
+engine thread), each with its own accumulator. When every pairwise kernel has a compiled
+form, a thread's whole share (steps 1–3 for all its strips) is one compiled call that holds
+no GIL (``_kernels.pair_strips``, BLAS called from numba); otherwise a Python loop makes the
+same calls strip by strip, and each call's GIL hand-back can wait for the other thread
+(measured 10–100 µs per hand-off on the 2-core VM: at k = 10 the loop gained nothing from a
+second thread, the compiled worker 1.5–1.8×).
 
 With ``precision="mixed"`` steps 1–3 (Gram blocks, kernel values, products and accumulators)
 run in float32 (``sgemm``), with close pairs still recomputed from float64 differences; the
@@ -417,11 +423,11 @@ class Scene:
             tau = ft.type(_kernels.tau_for(dim, ft))
 
             def cwork(g, my_strips):
-                with _threads.blas_threads(1):
-                    _kernels.pair_strips(np.array(my_strips, dtype=np.int64).reshape(-1, 2),
-                                         small, YT, Yg, nrm, Rg, tau, esrc, elast, ekind, epar,
-                                         ez, eacc, Zs, ws["acc3"][g], ws["q"][g], ws["phi"][g],
-                                         ws["scr"][g], ft.type(1.0))
+                _threads.pin_blas_one()
+                _kernels.pair_strips(np.array(my_strips, dtype=np.int64).reshape(-1, 2),
+                                     small, YT, Yg, nrm, Rg, tau, esrc, elast, ekind, epar,
+                                     ez, eacc, Zs, ws["acc3"][g], ws["q"][g], ws["phi"][g],
+                                     ws["scr"][g], ft.type(1.0))
                 return ws["acc"][g]
 
         def work(g, my_strips):
@@ -431,54 +437,57 @@ class Scene:
             for A in acc.values():
                 A.fill(0.0)
             qbuf, pbuf = ws["q"][g], ws["phi"][g]
-            with _threads.blas_threads(1):
-                for i0, i1 in my_strips:
-                    bb, m = i1 - i0, n - i0
-                    for s in sources:
-                        q = qbuf[: bb * m].reshape(bb, m)
-                        Y, nn = geo[s]
-                        if nn is None:
-                            _kernels.sqdist_rows(Y, i0, i1, i0, q)
+            _threads.pin_blas_one()
+            for i0, i1 in my_strips:
+                bb, m = i1 - i0, n - i0
+                for s in sources:
+                    q = qbuf[: bb * m].reshape(bb, m)
+                    Y, nn = geo[s]
+                    if nn is None:
+                        _kernels.sqdist_rows(Y, i0, i1, i0, q)
+                    else:
+                        R = state[s]
+                        _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q,
+                                              R[i0:i1], R[i0:], diag=0)
+                    _kernels.COUNTERS[s] += 1
+                    effs = by_source[s]
+                    for idx, (e, vs, Z, kk) in enumerate(effs):
+                        # the last effect of a source may overwrite the distances
+                        phi = q if idx == len(effs) - 1 else pbuf[: bb * m].reshape(bb, m)
+                        if vs is not None:
+                            vs(q, phi)
                         else:
-                            R = state[s]
-                            _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q,
-                                                  R[i0:i1], R[i0:], diag=0)
-                        _kernels.COUNTERS[s] += 1
-                        effs = by_source[s]
-                        for idx, (e, vs, Z, kk) in enumerate(effs):
-                            # the last effect of a source may overwrite the distances
-                            phi = q if idx == len(effs) - 1 else pbuf[: bb * m].reshape(bb, m)
-                            if vs is not None:
-                                vs(q, phi)
-                            else:
-                                phi[...] = e.kernel(np.sqrt(q))
-                            A = acc[kk]
-                            # rows of the strip: Φ_I,[i0:] @ Z[i0:]; columns beyond it, by
-                            # symmetry: Φ_I,[i1:]ᵀ @ Z_I (each unordered pair's φ used twice)
-                            _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
-                            if i1 < n:
-                                _threads.gemm(1.0, phi[:, bb:], Z[i0:i1], 1.0, A[i1:],
-                                              trans_a=True)
+                            phi[...] = e.kernel(np.sqrt(q))
+                        A = acc[kk]
+                        # rows of the strip: Φ_I,[i0:] @ Z[i0:]; columns beyond it, by
+                        # symmetry: Φ_I,[i1:]ᵀ @ Z_I (each unordered pair's φ used twice)
+                        _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
+                        if i1 < n:
+                            _threads.gemm(1.0, phi[:, bb:], Z[i0:i1], 1.0, A[i1:],
+                                          trans_a=True)
             return acc
 
-        if nthreads <= 1:
-            accs = [work(0, strips)]
-        else:
-            # balance: largest strip first to the least-loaded thread (deterministic)
-            groups = [[] for _ in range(nthreads)]
-            loads = [0] * nthreads
-            for i0, i1 in sorted(strips, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
-                g = loads.index(min(loads))
-                groups[g].append((i0, i1))
-                loads[g] += (i1 - i0) * (n - i0)
-            # groups 1.. in the pool, group 0 in the calling thread (one wake-up less)
-            futs = [_threads.pool(nthreads - 1).submit(work, g, sorted(groups[g]))
-                    for g in range(1, nthreads)]
-            try:
-                acc0 = work(0, sorted(groups[0]))
-            finally:
-                wait(futs)      # never leave a thread writing into the shared buffers
-            accs = [acc0] + [f.result() for f in futs]
+        # the caller owns the parallel region's BLAS setting (see _threads.blas_threads)
+        with _threads.blas_threads(1):
+            if nthreads <= 1:
+                accs = [work(0, strips)]
+            else:
+                # balance: largest strip first to the least-loaded thread (deterministic)
+                groups = [[] for _ in range(nthreads)]
+                loads = [0] * nthreads
+                for i0, i1 in sorted(strips,
+                                     key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
+                    g = loads.index(min(loads))
+                    groups[g].append((i0, i1))
+                    loads[g] += (i1 - i0) * (n - i0)
+                # groups 1.. in the pool, group 0 in the calling thread (one wake-up less)
+                futs = [_threads.pool(nthreads - 1).submit(work, g, sorted(groups[g]))
+                        for g in range(1, nthreads)]
+                try:
+                    acc0 = work(0, sorted(groups[0]))
+                finally:
+                    wait(futs)      # never leave a thread writing into the shared buffers
+                accs = [acc0] + [f.result() for f in futs]
         if compiled:
             for s in sources:
                 _kernels.COUNTERS[s] += len(strips)

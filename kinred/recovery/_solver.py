@@ -54,6 +54,7 @@ duality gap by ``cert_tol``; the polished solution is exact up to round-off.
 from __future__ import annotations
 
 import time
+from concurrent.futures import wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +62,7 @@ import numpy as np
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ..dynamics._threads import blas_threads, get_num_threads
+from ..dynamics._threads import blas_threads, get_num_threads, pin_blas_one
 from ..dynamics._threads import pool as thread_pool
 from ._kernels import admm_step, support_solve
 
@@ -597,14 +598,20 @@ def _run_chunks(run, nrow: int) -> None:
         return
 
     def worker(g):
-        with blas_threads(1):
-            for sl in slices[g::nthreads]:
-                run(sl)
+        pin_blas_one()
+        for sl in slices[g::nthreads]:
+            run(sl)
 
-    futs = [thread_pool(nthreads).submit(worker, g) for g in range(1, nthreads)]
-    worker(0)
-    for f in futs:
-        f.result()
+    # the caller owns the region's BLAS setting (process-wide in numpy's OpenBLAS: see
+    # kinred.dynamics._threads.blas_threads), restored once every worker has finished
+    with blas_threads(1):
+        futs = [thread_pool(nthreads - 1).submit(worker, g) for g in range(1, nthreads)]
+        try:
+            worker(0)
+        finally:
+            wait(futs)
+        for f in futs:
+            f.result()
 
 
 def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol, expand=None):
