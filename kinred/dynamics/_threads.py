@@ -6,7 +6,7 @@ import contextlib
 import ctypes
 import glob
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -15,39 +15,30 @@ from .._validate import as_int
 _STATE = {"n": max(1, min(os.cpu_count() or 1, 2)), "pool": None, "pool_n": 0}
 
 
-def _find_openblas_local():
-    """``openblas_set_num_threads_local`` of numpy's OpenBLAS, or None (best effort)."""
+def _openblas_function(names, restype, argtypes):
+    """The first of ``names`` exported by numpy's bundled OpenBLAS as a ctypes function
+    (``restype``/``argtypes`` set), with the library's path: ``(fn, path)``, or None."""
     libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
     for path in libs:
         try:
             lib = ctypes.CDLL(path)
-            fn = lib.openblas_set_num_threads_local
-            fn.argtypes = [ctypes.c_int]
-            fn.restype = ctypes.c_int
-            return fn
-        except (OSError, AttributeError):
+        except OSError:
             continue
+        for name in names:
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn.restype = restype
+                fn.argtypes = argtypes
+                return fn, os.path.abspath(path)
     return None
 
 
-_BLAS_LOCAL = _find_openblas_local()
-
-
-def _find_openblas_get():
-    """``openblas_get_num_threads`` of numpy's OpenBLAS, or None (tests read it)."""
-    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
-    for path in libs:
-        for name in ("scipy_openblas_get_num_threads64_", "openblas_get_num_threads"):
-            try:
-                fn = getattr(ctypes.CDLL(path), name)
-            except (OSError, AttributeError):
-                continue
-            fn.restype = ctypes.c_int
-            return fn
-    return None
-
-
-_BLAS_GET = _find_openblas_get()
+_found = _openblas_function(("openblas_set_num_threads_local",), ctypes.c_int, [ctypes.c_int])
+_BLAS_LOCAL = _found[0] if _found else None
+#: ``openblas_get_num_threads`` (tests read the count inside a parallel region), or None.
+_found = _openblas_function(("scipy_openblas_get_num_threads64_", "openblas_get_num_threads"),
+                            ctypes.c_int, [])
+_BLAS_GET = _found[0] if _found else None
 
 
 @contextlib.contextmanager
@@ -56,8 +47,8 @@ def blas_threads(n: int):
 
     In numpy's OpenBLAS, ``openblas_set_num_threads_local`` acts on the whole process, not
     on the calling thread (measured: a value set in one thread is read back in another).
-    Only the thread that owns a parallel region may therefore enter this context; its
-    workers call :func:`pin_blas_one`. (Two workers each entering it raced: the first to
+    Only the thread that owns a parallel region may therefore enter this context
+    (:func:`run_parallel` does, for its workers). (Two workers each entering it raced: the first to
     finish restored the old count while the other still computed, whose later BLAS calls
     then ran multithreaded – oversubscribed, and round-off that changed from call to call.)
     """
@@ -71,13 +62,28 @@ def blas_threads(n: int):
         _BLAS_LOCAL(int(prev))
 
 
-def pin_blas_one() -> None:
-    """In a worker of a parallel region: BLAS single-threaded, not restored. The region's
-    owner holds :func:`blas_threads` ``(1)`` around the region and restores the count after
-    every worker has finished; were the setting per thread, the pool threads are the
-    engine's own and stay at one."""
-    if _BLAS_LOCAL is not None:
-        _BLAS_LOCAL(1)
+def run_parallel(fn, args: list) -> list:
+    """``[fn(g, args[g]) for g in range(len(args))]`` in ``len(args)`` threads: group 0 in the
+    calling thread, the others in the engine's pool, with BLAS single-threaded for the whole
+    region. The caller owns the BLAS setting and restores it after every group has finished
+    (numpy's OpenBLAS applies it process-wide, see :func:`blas_threads`); pool threads also
+    set it for themselves, in case a BLAS keeps it per thread. Results in group order."""
+    n = len(args)
+    with blas_threads(1):
+        if n == 1:
+            return [fn(0, args[0])]
+
+        def pinned(g, a):
+            if _BLAS_LOCAL is not None:
+                _BLAS_LOCAL(1)
+            return fn(g, a)
+
+        futs = [pool(n - 1).submit(pinned, g, args[g]) for g in range(1, n)]
+        try:
+            first = fn(0, args[0])
+        finally:
+            wait(futs)      # never leave a thread writing into the caller's buffers
+        return [first] + [f.result() for f in futs]
 
 
 def set_num_threads(n: int) -> None:
@@ -123,19 +129,17 @@ def pool(n: int) -> ThreadPoolExecutor:
 
 
 # ---------------------------------------------------------------------- direct BLAS (gemm)
+_GEMM_NAMES = ("scipy_cblas_{}gemm64_", "cblas_{}gemm64_", "scipy_cblas_{}gemm", "cblas_{}gemm")
+
+
 def cblas_gemm_symbol(kind: str):
     """``(library path, symbol, ilp64)`` of ``cblas_?gemm`` (``kind`` = ``"d"`` or ``"s"``) in
     numpy's own OpenBLAS (ILP64 ``scipy_cblas_dgemm64_`` first), or None."""
-    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "*openblas*"))
-    for path in libs:
-        for name, ilp64 in ((f"scipy_cblas_{kind}gemm64_", True), (f"cblas_{kind}gemm64_", True),
-                            (f"scipy_cblas_{kind}gemm", False), (f"cblas_{kind}gemm", False)):
-            try:
-                getattr(ctypes.CDLL(path), name)
-            except (OSError, AttributeError):
-                continue
-            return os.path.abspath(path), name, ilp64
-    return None
+    found = _openblas_function(tuple(f.format(kind) for f in _GEMM_NAMES), None, None)
+    if found is None:
+        return None
+    fn, path = found
+    return path, fn.__name__, fn.__name__.endswith("64_")
 
 
 def _find_cblas_gemm(kind: str):
@@ -150,14 +154,11 @@ def _find_cblas_gemm(kind: str):
     found = cblas_gemm_symbol(kind)
     if found is None:
         return None
-    path, name, ilp64 = found
-    itype = ctypes.c_int64 if ilp64 else ctypes.c_int
-    fn = getattr(ctypes.CDLL(path), name)
-    fn.restype = None
-    fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
-                   scalar, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
-                   scalar, ctypes.c_void_p, itype]
-    return fn
+    itype = ctypes.c_int64 if found[2] else ctypes.c_int
+    return _openblas_function((found[1],), None,
+                              [ctypes.c_int, ctypes.c_int, ctypes.c_int, itype, itype, itype,
+                               scalar, ctypes.c_void_p, itype, ctypes.c_void_p, itype,
+                               scalar, ctypes.c_void_p, itype])[0]
 
 
 _CBLAS = {np.dtype(np.float64): _find_cblas_gemm("d"), np.dtype(np.float32): _find_cblas_gemm("s")}

@@ -57,7 +57,6 @@ A scene without pairwise effects costs ``O(N·d)`` per evaluation.
 from __future__ import annotations
 
 import threading
-from concurrent.futures import wait
 from typing import Sequence
 
 import numpy as np
@@ -423,7 +422,6 @@ class Scene:
             tau = ft.type(_kernels.tau_for(dim, ft))
 
             def cwork(g, my_strips):
-                _threads.pin_blas_one()
                 _kernels.pair_strips(np.array(my_strips, dtype=np.int64).reshape(-1, 2),
                                      small, YT, Yg, nrm, Rg, tau, esrc, elast, ekind, epar,
                                      ez, eacc, Zs, ws["acc3"][g], ws["q"][g], ws["phi"][g],
@@ -437,7 +435,6 @@ class Scene:
             for A in acc.values():
                 A.fill(0.0)
             qbuf, pbuf = ws["q"][g], ws["phi"][g]
-            _threads.pin_blas_one()
             for i0, i1 in my_strips:
                 bb, m = i1 - i0, n - i0
                 for s in sources:
@@ -467,27 +464,15 @@ class Scene:
                                           trans_a=True)
             return acc
 
-        # the caller owns the parallel region's BLAS setting (see _threads.blas_threads)
-        with _threads.blas_threads(1):
-            if nthreads <= 1:
-                accs = [work(0, strips)]
-            else:
-                # balance: largest strip first to the least-loaded thread (deterministic)
-                groups = [[] for _ in range(nthreads)]
-                loads = [0] * nthreads
-                for i0, i1 in sorted(strips,
-                                     key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
-                    g = loads.index(min(loads))
-                    groups[g].append((i0, i1))
-                    loads[g] += (i1 - i0) * (n - i0)
-                # groups 1.. in the pool, group 0 in the calling thread (one wake-up less)
-                futs = [_threads.pool(nthreads - 1).submit(work, g, sorted(groups[g]))
-                        for g in range(1, nthreads)]
-                try:
-                    acc0 = work(0, sorted(groups[0]))
-                finally:
-                    wait(futs)      # never leave a thread writing into the shared buffers
-                accs = [acc0] + [f.result() for f in futs]
+        # balance: largest strip first to the least-loaded thread (deterministic)
+        groups = [[] for _ in range(nthreads)]
+        loads = [0] * nthreads
+        for i0, i1 in sorted(strips, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
+            g = loads.index(min(loads))
+            groups[g].append((i0, i1))
+            loads[g] += (i1 - i0) * (n - i0)
+        # group 0 in the calling thread, BLAS single-threaded for the whole region
+        accs = _threads.run_parallel(work, [sorted(gr) for gr in groups])
         if compiled:
             for s in sources:
                 _kernels.COUNTERS[s] += len(strips)

@@ -54,7 +54,6 @@ duality gap by ``cert_tol``; the polished solution is exact up to round-off.
 from __future__ import annotations
 
 import time
-from concurrent.futures import wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,8 +61,7 @@ import numpy as np
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ..dynamics._threads import blas_threads, get_num_threads, pin_blas_one
-from ..dynamics._threads import pool as thread_pool
+from ..dynamics._threads import get_num_threads, run_parallel
 from ._kernels import admm_step, support_solve
 
 __all__ = [
@@ -597,21 +595,8 @@ def _run_chunks(run, nrow: int) -> None:
             run(sl)
         return
 
-    def worker(g):
-        pin_blas_one()
-        for sl in slices[g::nthreads]:
-            run(sl)
-
-    # the caller owns the region's BLAS setting (process-wide in numpy's OpenBLAS: see
-    # kinred.dynamics._threads.blas_threads), restored once every worker has finished
-    with blas_threads(1):
-        futs = [thread_pool(nthreads - 1).submit(worker, g) for g in range(1, nthreads)]
-        try:
-            worker(0)
-        finally:
-            wait(futs)
-        for f in futs:
-            f.result()
+    run_parallel(lambda g, part: [run(sl) for sl in part],
+                 [slices[g::nthreads] for g in range(nthreads)])
 
 
 def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol, expand=None):
