@@ -353,3 +353,164 @@ def test_mixture_of_atomic_measures():
     m = Mixture([TensorProduct([Empirical1D([0.0, 1.0]), Dirac(0.0)]), Atomic([[5.0, 5.0]])], [0.5, 0.5])
     r = w1(m, Dirac([0.0, 0.0]))
     assert r.exact and r.value == pytest.approx(0.25 + 0.5 * math.sqrt(50.0), rel=REL)
+
+
+# ------------------------------------------------------------- magnitudes (issue 14, W1 defects)
+# W1 is translation invariant and homogeneous, W1(c + sμ, c + sν) = s·W1(μ, ν). Every method
+# computes in one common frame of order one (kinred.distance._inputs.normalize_pair), so inputs
+# near 1e160 (squared costs overflow) or 1e-200 (squared costs underflow) keep full accuracy.
+
+#: The audit's scales, and powers of two next to them (scaling by those is exact, so large
+#: shifts c can be added without rounding the inputs).
+SCALES = [1e-200, 1e-100, 1.0, 1e100, 1e160, 1e200]
+POW2_SCALES = [2.0**-664, 2.0**-332, 1.0, 2.0**332, 2.0**531, 2.0**664]
+
+
+def _every_method(x, y, a, b, seed=0):
+    """``{name: (value, lower, upper)}`` of every method applicable to atoms ``x``, ``y``."""
+    out = {}
+    methods = ["exact", "exact-lazy", "bracket", "product-l1"] + (["exact-1d"] if x.shape[1] == 1 else [])
+    for m in methods:
+        r = w1(x, y, m, a=a, b=b, product=True, seed=seed)
+        out[m] = (r.value, r.lower, r.upper)
+    s = sliced_w1(x, y, n_projections=16, a=a, b=b, seed=seed)
+    out["sliced_w1"] = (s.value, s.stderr, s.value)
+    return out
+
+
+def _assert_scaled(got, base, s, rel=1e-12, abs=0):
+    """``got = s·base`` to ``rel`` (relative to the largest number of each method: a sliced
+    W1's standard error is pure round-off in d = 1)."""
+    for name, vals in base.items():
+        want = tuple(s * v for v in vals)
+        assert got[name] == pytest.approx(want, rel=rel, abs=rel * max(want)), name
+
+
+@pytest.mark.parametrize("method", ["exact", "exact-lazy", "bracket", "auto"])
+def test_w1_diracs_at_1e160_do_not_overflow(method):
+    # the audit's reproducer: it returned inf (squared costs 1e320 overflow)
+    r = w1(np.array([[1e160, 0.0]]), np.array([[0.0, 1e160]]), method)
+    assert r.value == pytest.approx(math.sqrt(2.0) * 1e160, rel=1e-15, abs=0)
+    assert r.lower <= r.value <= r.upper and math.isfinite(r.upper)
+    p = w1(np.array([[1e160, 0.0]]), np.array([[0.0, 1e160]]), "product-l1")
+    assert p.value == pytest.approx(2e160, rel=1e-15, abs=0)
+
+
+@pytest.mark.parametrize("n", [2, 3, 5, 10])
+@pytest.mark.parametrize("s", [1e155, 1e170, 1e200])
+def test_w1_few_atoms_near_1e155_to_1e200_converge(n, s):
+    # these raised NotConverged("... Check that a and b are in the simplex"), blaming the weights
+    rng = np.random.default_rng(n)
+    x, y = rng.random((n, 3)), rng.random((n, 3)) + 0.5
+    for method in ("exact", "exact-lazy", "auto"):
+        assert w1(s * x, s * y, method).value == pytest.approx(s * w1(x, y, method).value, rel=1e-12, abs=0)
+
+
+def test_w1_at_1e_minus_200_is_not_zero():
+    # the audit's reproducer: 0.0 (squared costs 1e-400 underflow) instead of sqrt(3)·1e-200
+    A = np.random.default_rng(1).integers(0, 10, size=(10, 3)).astype(float)
+    for method in ("exact", "exact-lazy", "bracket", "auto"):
+        r = w1(A * 1e-200, (A + 1) * 1e-200, method)
+        assert r.value == pytest.approx(math.sqrt(3.0) * 1e-200, rel=1e-12, abs=0), method
+        assert r.lower <= r.value <= r.upper
+    assert w1(A * 1e-200, (A + 1) * 1e-200, "product-l1", product=True).value == pytest.approx(
+        3e-200, rel=1e-12, abs=0)
+
+
+@pytest.mark.parametrize("s", SCALES)
+@pytest.mark.parametrize("d", [1, 3])
+def test_every_method_is_homogeneous_at_extreme_scales(s, d):
+    rng = np.random.default_rng(10 + d)
+    x, y = rng.standard_normal((6, d)), rng.standard_normal((5, d)) + 0.3
+    a, b = _rand_weights(rng, 6), _rand_weights(rng, 5)
+    _assert_scaled(_every_method(s * x, s * y, a, b), _every_method(x, y, a, b), s)
+
+
+@pytest.mark.parametrize("s", POW2_SCALES)
+@pytest.mark.parametrize("shift_bits", [0, 20, 40])
+def test_every_method_is_translation_invariant_with_large_shifts(s, shift_bits):
+    # dyadic atoms and shifts: s·(x + c) is exact, so the identity must hold to round-off
+    rng = np.random.default_rng(shift_bits)
+    x, y = rng.integers(-64, 64, (7, 3)) / 8.0, rng.integers(-64, 64, (6, 3)) / 8.0
+    c = rng.integers(-(2**shift_bits), 2**shift_bits + 1, 3).astype(float)
+    a, b = _rand_weights(rng, 7), _rand_weights(rng, 6)
+    _assert_scaled(_every_method(s * (x + c), s * (y + c), a, b), _every_method(x, y, a, b), s)
+
+
+@given(st.integers(1, 3), st.integers(1, 6), st.integers(1, 6), st.integers(-1000, 960),
+       st.integers(0, 40), st.integers(0, 10_000))
+def test_w1_homogeneity_and_translation_property(d, n, m, k, shift_bits, seed):
+    rng = np.random.default_rng(seed)
+    x, y = rng.integers(-64, 64, (n, d)) / 8.0, rng.integers(-64, 64, (m, d)) / 8.0
+    c = rng.integers(-(2**shift_bits), 2**shift_bits + 1, d).astype(float)
+    a, b = _rand_weights(rng, n), _rand_weights(rng, m)
+    s = math.ldexp(1.0, k)
+    _assert_scaled(_every_method(s * (x + c), s * (y + c), a, b, seed), _every_method(x, y, a, b, seed), s)
+
+
+@pytest.mark.parametrize("p, q", [
+    ([1e300, -1e300], [-1e300, 1e300]),
+    ([1e200, 1e-200], [-1e200, 0.0]),
+    ([3e-300, 0.0], [0.0, 4e-300]),
+    ([7 * 5e-324, 0.0, 0.0], [0.0, 0.0, 0.0]),          # subnormal coordinates
+    ([1e16 + 2.0, 1e16], [1e16, 1e16 + 4.0]),           # a small distance far from the origin
+])
+def test_w1_of_two_diracs_is_their_distance(p, q):
+    ref = math.dist(p, q)
+    for method in ("exact", "exact-lazy", "bracket", "auto"):
+        r = w1(Dirac(p), Dirac(q), method)
+        assert r.value == pytest.approx(ref, rel=1e-14, abs=0), method
+    assert w1(Dirac(p), Dirac(q), "product-l1").value == pytest.approx(
+        sum(abs(u - v) for u, v in zip(p, q)), rel=1e-14, abs=0)
+
+
+@pytest.mark.parametrize("s", SCALES)
+def test_closed_forms_of_continuous_laws_at_extreme_scales(s):
+    # uniform shift: W1(U(c, c + s), U(c + t, c + t + s)) = t; midpoint quantizer: s/(4N)
+    c, t = 3.0 * s, 0.25 * s
+    assert w1(Uniform(c, c + s), Uniform(c + t, c + t + s)).value == pytest.approx(t, rel=1e-12, abs=0)
+    N = 8
+    q = s * (2.0 * np.arange(1, N + 1) - 1.0) / (2 * N)
+    assert w1(Uniform(0.0, s), q).value == pytest.approx(s / (4 * N), rel=1e-12, abs=0)
+    x = np.array([0.0, 1.0, 5.0]) * s
+    assert w1(x, x + t).value == pytest.approx(t, rel=1e-12, abs=0)
+    # a product of uniforms translated by (t, t): W1 = sqrt(2)·t (the bracket's bounds meet),
+    # l1 cost 2t; at 1e160 the squared marginal W2s overflowed and "exact" W1 was 2t
+    P = TensorProduct([Uniform(c, c + s), Uniform(-c, -c + 2 * s)])
+    Q = TensorProduct([Uniform(c + t, c + t + s), Uniform(-c + t, -c + t + 2 * s)])
+    r = w1(P, Q)
+    assert r.method == "bracket" and r.exact
+    assert r.value == pytest.approx(math.sqrt(2.0) * t, rel=1e-12, abs=0)
+    assert w1(P, Q, "product-l1").value == pytest.approx(2 * t, rel=1e-12, abs=0)
+
+
+def test_common_frame_does_not_round_the_atoms():
+    # a detail of 1e-20 next to an atom at 1e10 survives (the box touches 0: no shift), and so
+    # does a unit detail at 1e16 (the box is far from 0: shifted by its centre, exactly)
+    for off in (0.0, 1e16):
+        x = np.array([[off, 0.0], [off + 1e10, 0.0]])
+        y = np.array([[off + (1e-20 if off == 0 else 2.0), 0.0], [off + 1e10, 0.0]])
+        want = 0.5e-20 if off == 0 else 1.0
+        for method in ("exact", "exact-lazy", "bracket", "product-l1", "auto"):
+            assert w1(x, y, method, product=True).value == pytest.approx(want, rel=1e-12, abs=0), method
+
+
+def test_w1_above_the_float_range_is_an_error_not_inf():
+    r = w1(np.array([[-8e307, 0.0]]), np.array([[8e307, 0.0]]))
+    assert r.value == pytest.approx(1.6e308, rel=1e-15, abs=0)
+    assert w1(np.array([-8e307]), np.array([8e307])).value == pytest.approx(1.6e308, rel=1e-15, abs=0)
+    with pytest.raises(InvalidInput, match="exceeds the largest float64"):
+        w1(np.array([[-1e308, -1e308]]), np.array([[1e308, 1e308]]))
+    with pytest.raises(InvalidInput, match="exceeds the largest float64"):
+        w1(np.array([-1e308]), np.array([1e308]), "exact-1d")
+
+
+def test_pot_wrappers_refuse_costs_that_would_overflow():
+    # kinred.distance.w1 never hands POT such coordinates; its private wrappers refuse them
+    # instead of letting POT report an "infeasible" problem that blames the weights
+    from kinred.distance._pot import emd_dense, emd_lazy
+
+    x, y, w = np.array([[1e160, 0.0]]), np.array([[0.0, 1e160]]), np.ones(1)
+    for f in (emd_dense, emd_lazy):
+        with pytest.raises(InvalidInput, match="overflow"):
+            f(x, w, y, w)

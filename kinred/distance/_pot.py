@@ -11,6 +11,13 @@ Two pitfalls of calling POT directly are handled here:
   returned cost is then that of a sub-optimal plan (several percent too large at a few
   thousand atoms). We set ``numItermax`` from the problem size and raise
   :class:`kinred.errors.NotConverged` when the solver still reports an early stop.
+
+A third one is magnitude: squared coordinate differences overflow past about 1e154 (the cost
+becomes ``inf`` and POT reports an "infeasible" problem, blaming the weights) and underflow
+below about 1e-154 (every cost becomes 0). :func:`kinred.distance.w1` therefore hands these
+solvers coordinates of order one (the common frame of
+:func:`kinred.distance._inputs.normalize_pair`); :func:`_cost_bound` refuses coordinates whose
+costs could overflow, and a failure message states the weight sums and the cost bound.
 """
 
 from __future__ import annotations
@@ -33,7 +40,30 @@ def default_num_iter_max(n: int, m: int) -> int:
     return int(max(100_000, 50 * int(n) * int(m)))
 
 
-def _check(log: dict, num_iter_max: int, n: int, m: int, solver: str) -> None:
+#: Largest admissible bound on a ground cost: its square (computed by the solvers) stays finite.
+_MAX_COST = 1e150
+
+
+def _cost_bound(x: np.ndarray, y: np.ndarray) -> float:
+    """``d·(max|x| + max|y|)``, a bound on every Euclidean and ℓ1 cost ``|xᵢ − yⱼ|``.
+
+    Raises
+    ------
+    InvalidInput
+        When the bound exceeds ``1e150`` (squared differences could overflow).
+    """
+    with np.errstate(over="ignore"):
+        bound = x.shape[1] * (float(np.max(np.abs(x))) + float(np.max(np.abs(y))))
+    if not bound <= _MAX_COST:
+        raise InvalidInput(
+            f"coordinates up to {float(np.max(np.abs(x))):.3g} and {float(np.max(np.abs(y))):.3g} "
+            f"in d = {x.shape[1]} give OT costs up to {bound:.3g} > {_MAX_COST:.0e}, whose squares "
+            "overflow; rescale the points (kinred.distance.w1 does so itself)"
+        )
+    return bound
+
+
+def _check(log: dict, num_iter_max: int, n: int, m: int, solver: str, a, b, bound: float) -> None:
     code = int(log.get("result_code", 1))
     if code == 1:
         return
@@ -44,8 +74,9 @@ def _check(log: dict, num_iter_max: int, n: int, m: int, solver: str) -> None:
             "Pass a larger num_iter_max"
         )
     raise NotConverged(
-        f"POT {solver} returned status {code} ({_CODES.get(code, 'unknown')}: "
-        f"{log.get('warning')!r}) on a {n} x {m} problem"
+        f"POT {solver} returned status {code} ({_CODES.get(code, 'unknown')}) on a {n} x {m} "
+        f"problem whose weights sum to {float(np.sum(a))!r} and {float(np.sum(b))!r} and whose "
+        f"costs are finite and at most {bound:.3g}; POT's message: {log.get('warning')!r}"
     )
 
 
@@ -75,6 +106,8 @@ def emd_dense(x, a, y, b, *, metric: str = "euclidean", num_iter_max: int | None
 
     Raises
     ------
+    InvalidInput
+        Coordinates so large that squared costs could overflow (:func:`_cost_bound`).
     NotConverged
         When the network simplex stopped early (or reported infeasibility).
     """
@@ -82,11 +115,12 @@ def emd_dense(x, a, y, b, *, metric: str = "euclidean", num_iter_max: int | None
 
     n, m = x.shape[0], y.shape[0]
     it = default_num_iter_max(n, m) if num_iter_max is None else int(num_iter_max)
+    bound = _cost_bound(x, y)
     M = cost_matrix(x, y, metric)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         cost, log = ot.emd2(a, b, M, numItermax=it, log=True)
-    _check(log, it, n, m, "emd2")
+    _check(log, it, n, m, "emd2", a, b, bound)
     if return_duals:
         return float(cost), (np.asarray(log["u"]), np.asarray(log["v"]))
     return float(cost)
@@ -102,11 +136,12 @@ def emd_lazy(x, a, y, b, *, metric: str = "euclidean", num_iter_max: int | None 
         )
     n, m = x.shape[0], y.shape[0]
     it = default_num_iter_max(n, m) if num_iter_max is None else int(num_iter_max)
+    bound = _cost_bound(x, y)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         cost, log = ot.lp.emd2_lazy(
             np.ascontiguousarray(x), np.ascontiguousarray(y), a, b, metric=POT_METRIC[metric],
             numItermax=it, log=True, return_matrix=False,
         )
-    _check(log, it, n, m, "emd2_lazy")
+    _check(log, it, n, m, "emd2_lazy", a, b, bound)
     return float(cost)

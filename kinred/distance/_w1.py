@@ -10,7 +10,7 @@ from .._rng import as_generator
 from .._validate import as_choice, as_int
 from ..errors import InvalidInput, TooLarge
 from ._bracket import bracket_atoms, mean_lower
-from ._inputs import Prod, Pts, grid_marginals, marginal, normalize
+from ._inputs import Prod, Pts, grid_marginals, marginal, normalize_pair
 from ._oned import product_upper, w1_1d, w1_atoms_1d, w1_cont_atoms
 from ._pot import emd_dense, emd_lazy
 from ._result import SlicedW1Result, W1Result
@@ -130,6 +130,13 @@ def w1(
     eq. (4.5) of the paper (label ``wasserstein``), Euclidean ground metric unless
     ``metric="l1"``.
 
+    Every method computes in one common frame ``x = c + s·z`` of both measures (``s`` a power
+    of two of the order of the width of their joint bounding box, ``c`` its centre on the
+    coordinates where subtracting it is exact) and multiplies its numbers back by ``s``: W1 is
+    translation invariant and homogeneous, ``W1(c + sμ, c + sν) = s·W1(μ, ν)``, so the costs
+    stay of order one for any finite input (no overflow near 1e160, no underflow near 1e-200)
+    and the result keeps its relative accuracy.
+
     Parameters
     ----------
     mu, nu : kinred measure or (N, d) array_like
@@ -178,8 +185,8 @@ def w1(
     Raises
     ------
     InvalidInput
-        NaN/Inf, dimension mismatch, bad weights, unknown method, or a method that does not
-        apply to the given measures.
+        NaN/Inf, dimension mismatch, bad weights, unknown method, a method that does not
+        apply to the given measures, or a distance above the largest float64.
     NotConverged
         POT stopped before optimality.
     TooLarge
@@ -208,10 +215,7 @@ def w1(
     leaf_size = as_int(leaf_size, "leaf_size", low=1)
     dual_sample = as_int(dual_sample, "dual_sample", low=0)
     grid_atoms = as_int(grid_atoms, "grid_atoms", low=1)
-    A = normalize(mu, a, "mu", "a")
-    B = normalize(nu, b, "nu", "b")
-    if A.dim != B.dim:
-        raise InvalidInput(f"mu and nu must live in the same dimension, got dim {A.dim} and {B.dim}")
+    A, B, unit = normalize_pair(mu, nu, a, b)
     d = A.dim
     if isinstance(A, Prod) and d == 1:
         A = A.factors[0]
@@ -219,6 +223,7 @@ def w1(
         B = B.factors[0]
     n_atoms = (_n_atoms(A), _n_atoms(B))
     rng_holder = [seed]
+    auto = method == "auto"
 
     def rng():
         if not isinstance(rng_holder[0], np.random.Generator):
@@ -245,16 +250,34 @@ def w1(
                     )
             else:
                 method = "bracket"
-        res = _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
-                   n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs)
-        return W1Result(res.value, res.method, res.exact, res.lower, res.upper, res.n_atoms,
-                        f"auto chose {res.method}: {res.note}", res.metric)
-    return _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
-                n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs)
+    res = _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
+               n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs, unit)
+    note = f"auto chose {res.method}: {res.note}" if auto else res.note
+    return _in_units(res, unit, note)
+
+
+def _to_units(value: float, unit: float, what: str) -> float:
+    """``value`` (a distance in the frame of :func:`normalize_pair`) times the frame's scale."""
+    out = float(value) * unit
+    if not math.isfinite(out):
+        raise InvalidInput(
+            f"{what}(mu, nu) = {float(value)!r} x {unit!r} exceeds the largest float64 "
+            f"({np.finfo(np.float64).max:.3g}); rescale mu and nu ({what}(s mu, s nu) = "
+            f"s {what}(mu, nu))"
+        )
+    return out
+
+
+def _in_units(res: W1Result, unit: float, note: str) -> W1Result:
+    """``res``, computed in the common frame, in the units of the input (bounds included)."""
+    value = _to_units(res.value, unit, "W1")
+    lower, upper = float(res.lower) * unit, float(res.upper) * unit
+    return W1Result(value, res.method, res.exact, lower, upper, res.n_atoms, note, res.metric)
 
 
 def _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
-         n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs):
+         n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs, unit):
+    """Run one (resolved) method on measures in the common frame; ``unit`` only scales notes."""
     if method in ("exact", "exact-lazy"):
         PA = _as_pts(A, _MAX_MATERIALIZE, "mu")
         PB = _as_pts(B, _MAX_MATERIALIZE, "nu")
@@ -289,7 +312,7 @@ def _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_ma
         v, err, how = w1_1d(A, B)
         note = f"exact 1-D W1 ({how})"
         if err > 0:
-            note += f"; quadrature error estimate {err:.1e}"
+            note += f"; quadrature error estimate {err * unit:.1e}"
         return _exact_result(v, "exact-1d", n_atoms, note, metric)
 
     if method == "product-l1":
@@ -357,7 +380,8 @@ def _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_ma
         else:
             rlo, rup, _ = bracket_atoms(G, other, rng(), n_projections=n_projections,
                                         leaf_size=leaf_size, dual_sample=dual_sample)
-        ups[f"triangle inequality via a {G.n}-atom grid quantization (grid error <= {eG:.3g})"] = rup + eG
+        grid = f"a {G.n}-atom grid quantization (grid error <= {eG * unit:.3g})"
+        ups[f"triangle inequality via {grid}"] = rup + eG
         lows["triangle inequality via the grid"] = rlo - eG
     lo_name = max(lows, key=lows.get)
     up_name = min(ups, key=ups.get)
@@ -410,10 +434,7 @@ def sliced_w1(mu, nu, n_projections: int = 256, *, a=None, b=None, seed=None) ->
     True
     """
     n_projections = as_int(n_projections, "n_projections", low=1)
-    A = normalize(mu, a, "mu", "a")
-    B = normalize(nu, b, "nu", "b")
-    if A.dim != B.dim:
-        raise InvalidInput(f"mu and nu must live in the same dimension, got dim {A.dim} and {B.dim}")
+    A, B, unit = normalize_pair(mu, nu, a, b)
     PA = _as_pts(A, _MAX_MATERIALIZE, "mu")
     PB = _as_pts(B, _MAX_MATERIALIZE, "nu")
     if PA is None or PB is None:
@@ -426,6 +447,6 @@ def sliced_w1(mu, nu, n_projections: int = 256, *, a=None, b=None, seed=None) ->
     vals = np.array([w1_atoms_1d(px[:, k], PA.weights, py[:, k], PB.weights)
                      for k in range(n_projections)])
     se = float(vals.std(ddof=1) / math.sqrt(n_projections)) if n_projections > 1 else float("nan")
-    return SlicedW1Result(float(vals.mean()), se, n_projections,
+    return SlicedW1Result(_to_units(vals.mean(), unit, "SW1"), se * unit, n_projections,
                           f"mean of exact 1-D W1 over {n_projections} random directions; "
                           "sliced W1 <= W1, NOT an estimate of W1")
