@@ -202,3 +202,35 @@ def test_theorem_bound_pieces_on_small_case():
                                         tb.Lp[i], tb.Lpp[i], tb.norm_M))
     assert tb.bound[i] == pytest.approx(want, rel=1e-12)
     assert tb.C[i] == pytest.approx(math.exp(tb.Lambda[i] * tb.t[i]))
+
+
+# ------------------------------------------------- W1 at extreme magnitudes (issue 14, W1)
+@pytest.mark.parametrize("s", [1e-200, 1e160, 1e200])
+def test_compare_and_reference_estimate_are_homogeneous_at_extreme_scales(s):
+    # free transport is linear, so scaling the data by s scales every W1, coupling and uniform
+    # error by s; squared differences used to overflow (inf) near 1e160 and underflow (0) near 1e-200
+    import dataclasses
+
+    d = 4
+    X0 = np.random.default_rng(3).integers(-8, 8, size=(7, 2 * d)) / 8.0
+    M = jl_matrix(2, d, seed=1)
+    off = np.array([0.375, -0.25])
+
+    def run(scale):
+        sol = solve(_free(d), Atomic(scale * X0), t_span=(0.0, 1.0), dt=0.25)
+        red = reduce(sol, M=M)
+        red = dataclasses.replace(red, y=red.y + scale * off)
+        ref = solve(_free(d), Atomic(scale * (X0 + 0.125)), t_span=(0.0, 1.0), dt=0.25)
+        est = reference_estimate(sol, ref, reduce(ref, M=M))
+        return compare(sol, red), est
+
+    c1, e1 = run(1.0)
+    cs, es = run(s)
+    assert c1.w1.min() > 0.1 and cs.exact.all() and es.exact
+    for name in ("w1", "lower", "upper", "coupling", "uniform"):
+        np.testing.assert_allclose(getattr(cs, name), s * getattr(c1, name), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(es.w1_quantization, s * e1.w1_quantization, rtol=1e-12, atol=0)
+    assert es.w1_reference.max() <= 1e-12 * s       # a linear scene projects exactly: round-off
+    # closed form of the quantization W1: a translation by 0.125 (1 + t) in x and 0.125 in v
+    want = 0.125 * np.sqrt(d * (1 + e1.t) ** 2 + d)
+    np.testing.assert_allclose(e1.w1_quantization, want, rtol=1e-12)

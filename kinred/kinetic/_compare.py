@@ -59,6 +59,12 @@ class Comparison:
     k: int
 
 
+def _row_norms(D: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of ``D`` by repeated ``hypot``: no overflow or underflow of
+    the squares (rows of size 1e160 or 1e-200 keep their relative accuracy)."""
+    return np.hypot.reduce(D, axis=1)
+
+
 def _w1_atoms(A, B, wa, wb):
     from ..distance import w1
 
@@ -99,9 +105,9 @@ def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:
         r = _w1_atoms(A, B, w, reduced.weights)
         vals[i], ex[i], lo[i], hi[i] = r.value, r.exact, r.lower, r.upper
         method = r.method
-        ex_ = np.linalg.norm(Mx - reduced.y[i], axis=1)
-        ev_ = np.linalg.norm(Mv - reduced.w[i], axis=1)
-        cpl[i] = float(w @ np.sqrt(ex_ ** 2 + ev_ ** 2))
+        ex_ = _row_norms(Mx - reduced.y[i])
+        ev_ = _row_norms(Mv - reduced.w[i])
+        cpl[i] = float(w @ np.hypot(ex_, ev_))
         uni[i] = float(max(ex_.max(), ev_.max()))
     return Comparison(t=np.asarray(solution.t, float), w1=vals, exact=ex, lower=lo, upper=hi,
                       coupling=cpl, uniform=uni, method=method, k=P.k)
