@@ -9,16 +9,20 @@ Each sub-command lives in a module of :mod:`kinred.commands` exposing
 
 Errors derived from :class:`kinred.errors.KinredError` are printed as one line on stderr
 (``kinred: error: ...``) with exit code 2 and no traceback; an interrupt exits with 130 and
-says how to resume where the command supports it.
+says how to resume where the command supports it. Warnings of the
+:class:`kinred.errors.KinredWarning` family (a damaged stage file recomputed, a figure that
+could not be drawn) are printed as one line each, ``kinred: warning: ...``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
+import warnings
 
-from .errors import KinredError
+from .errors import KinredError, KinredWarning
 
 __all__ = ["main", "build_parser"]
 
@@ -51,10 +55,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _one_line_warnings():
+    """Within the block, every KinredWarning is printed as one line ``kinred: warning: ...``."""
+    with warnings.catch_warnings():
+        default_show = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, KinredWarning):
+                print(f"kinred: warning: {message}", file=sys.stderr)
+            else:
+                default_show(message, category, filename, lineno, file, line)
+
+        warnings.simplefilter("always", KinredWarning)
+        warnings.showwarning = show
+        yield
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``kinred`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    with _one_line_warnings():
+        return _run(args)
+
+
+def _run(args) -> int:
     try:
         code = args._run(args)
     except KinredError as exc:

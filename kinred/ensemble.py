@@ -42,7 +42,11 @@ Each member archive holds the member's arrays and a ``__meta__`` entry (JSON: in
 wall time, scalar and string results), so one atomic rename commits a member.
 ``resume=True`` loads the members already present and computes only the others; it refuses
 (:class:`StoreMismatch`) if the stored ``run.json`` has a different config hash. A killed run
-(even ``SIGKILL``) loses at most the members that were in flight.
+(even ``SIGKILL``) loses at most the members that were in flight. A damaged member file
+(truncated, not an ``.npz`` archive, missing entries) is reported by a
+:class:`~kinred.errors.KinredWarning` naming it and recomputed; a damaged ``run.json`` is
+refused (:class:`~kinred.errors.DamagedFile`): it is what ties the member files to the run, so
+the message says to delete the store or to choose a new directory.
 
 **Functions must be picklable** for ``"processes"`` and ``"dask"``: define ``fn`` at the top
 level of an importable module (or of the ``__main__`` script, guarded by
@@ -84,7 +88,7 @@ import numpy as np
 from ._rng import member_seed
 from ._validate import as_choice, as_int
 from .dynamics import _threads as _engine_threads
-from .errors import InvalidInput, KinredError
+from .errors import DamagedFile, InvalidInput, KinredError, KinredWarning
 from .io import ResultFolder, atomic_write_npz, read_npz, to_jsonable
 
 __all__ = [
@@ -342,16 +346,35 @@ def _write_member(folder: ResultFolder, index: int, params: dict, out: dict, wal
     atomic_write_npz(folder / _member_name(index), arrays)
 
 
+def _decode_member(path: Path):
+    """``(arrays, meta)`` of a member file; :class:`DamagedFile` if it cannot be decoded."""
+    data = read_npz(path, what="member file")
+    if _META not in data:
+        raise DamagedFile(f"{path}: damaged member file: no {_META} entry", path=str(path))
+    try:
+        meta = json.loads(str(data.pop(_META)))
+        if not isinstance(meta, dict) or not isinstance(meta.get("scalars"), dict):
+            raise ValueError("not a JSON object with scalars")
+        missing = [k for k in meta["order"] if k not in meta["scalars"] and k not in data]
+        if missing:
+            raise ValueError(f"no array {missing[0]!r}")
+        float(meta["wall_time"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise DamagedFile(f"{path}: damaged member file: invalid {_META} ({type(exc).__name__}: "
+                          f"{exc})", path=str(path)) from None
+    return data, meta
+
+
 def _read_member(folder: ResultFolder, index: int, params: dict):
-    """``(out, wall)`` of a stored member, or ``None`` if absent or unreadable."""
+    """``(out, wall)`` of a stored member; ``None`` if absent or damaged (a
+    :class:`~kinred.errors.KinredWarning` names the damaged file; the member is recomputed)."""
     path = folder / _member_name(index)
     if not path.is_file():
         return None
     try:
-        data = read_npz(path)
-        meta = json.loads(str(data.pop(_META)))
-    except Exception as exc:  # a foreign or damaged file: recompute the member
-        warnings.warn(f"ignoring unreadable member file {path}: {exc}", UserWarning, stacklevel=3)
+        data, meta = _decode_member(path)
+    except DamagedFile as exc:
+        warnings.warn(f"{exc}; recomputing member {index}", KinredWarning, stacklevel=3)
         return None
     if meta.get("index") != index or meta.get("params") != params:
         raise StoreMismatch(
@@ -364,17 +387,31 @@ def _read_member(folder: ResultFolder, index: int, params: dict):
     return out, float(meta["wall_time"])
 
 
+def _stored_run(folder: ResultFolder) -> dict:
+    """The stored ``run.json``; a damaged one is refused with what to do about it."""
+    path = folder / "run.json"
+    try:
+        stored = folder.read_json("run.json", what="store description")
+        if not isinstance(stored, dict) or not isinstance(stored.get("config_hash"), str):
+            raise DamagedFile(f"{path}: damaged store description: no config hash", path=str(path))
+    except DamagedFile as exc:
+        raise DamagedFile(f"{exc}; it ties the member files to a run, so they cannot be resumed: "
+                          f"delete the store {str(folder.path)!r} and run again, or choose a new "
+                          "directory", path=str(path)) from None
+    return stored
+
+
 def _open_store(store, *, resume: bool, run_info: dict) -> ResultFolder:
     path = Path(store)
     run_json = path / "run.json"
     if run_json.is_file():
         folder = ResultFolder(path)
-        stored = folder.read_json("run.json")
         if not resume:
             raise StoreMismatch(
-                f"store {str(path)!r} already holds a run; pass resume=True to continue it "
-                "or choose a new directory"
+                f"store {str(path)!r} already holds a run; pass resume=True (--resume on the "
+                "command line) to continue it or choose a new directory"
             )
+        stored = _stored_run(folder)
         if stored.get("config_hash") != run_info["config_hash"]:
             raise StoreMismatch(
                 f"store {str(path)!r} holds a different run (config hash "
@@ -605,6 +642,9 @@ def run_ensemble(
         finished before are in the store.
     StoreMismatch
         ``store`` holds a different run (or any run, without ``resume``).
+    DamagedFile
+        ``resume=True`` and the store's ``run.json`` is damaged (damaged member files are
+        recomputed, with a :class:`~kinred.errors.KinredWarning`).
     KinredError
         ``executor="dask"`` without Dask installed.
     """

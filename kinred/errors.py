@@ -18,6 +18,8 @@ __all__ = [
     "NotConverged",
     "TooLarge",
     "NotProjectable",
+    "DamagedFile",
+    "KinredWarning",
 ]
 
 
@@ -31,6 +33,28 @@ class InvalidInput(KinredError, ValueError):
 
 class ConfigError(InvalidInput):
     """A scene or measure file is malformed: unknown, missing or mistyped key."""
+
+
+class DamagedFile(InvalidInput):
+    """A file exists but its content cannot be read back: truncated, empty, not UTF-8, not a
+    valid JSON document or ``.npz`` archive, or missing entries kinred wrote into it.
+
+    Attributes
+    ----------
+    path : str
+        The damaged file.
+    """
+
+    def __init__(self, message: str, *, path: str = ""):
+        super().__init__(message)
+        self.path = path
+
+    def __reduce__(self):
+        return (_rebuild_damaged, (str(self), self.path))
+
+
+def _rebuild_damaged(message, path):
+    return DamagedFile(message, path=path)
 
 
 class SimulationDiverged(KinredError, FloatingPointError):
@@ -60,3 +84,9 @@ class TooLarge(KinredError, MemoryError):
 
 class NotProjectable(KinredError, TypeError):
     """An effect does not belong to the paper's class (1.1) and cannot be projected exactly."""
+
+
+class KinredWarning(UserWarning):
+    """Something went wrong but kinred carried on: a damaged stage file recomputed on resume,
+    a figure that could not be drawn (the report has a note instead). The ``kinred`` command
+    prints these as one line, ``kinred: warning: ...``."""

@@ -10,12 +10,24 @@ Every file kinred writes goes through one pattern (the "write, fsync, rename" id
 
 A reader therefore sees either the old file or the complete new one, never a half-written
 file; if anything fails (an exception, ``KeyboardInterrupt``) before step 3, the temporary
-file is removed and the destination is untouched. Only a hard kill (``SIGKILL``, power loss)
+file is removed and the destination is untouched. The file gets the usual permissions
+(``0o666`` minus the umask, e.g. ``0644``). A destination that is an existing directory, or
+that cannot be written (permission, missing parent that cannot be created, full disk), raises
+:class:`~kinred.errors.InvalidInput` naming the path. Only a hard kill (``SIGKILL``, power loss)
 between steps 1 and 3 can leave a hidden ``*.tmp`` file behind; :meth:`ResultFolder.clean_temporary`
 removes such leftovers and :meth:`ResultFolder.list` never shows them.
 
 :class:`ResultFolder` groups the files of one result (JSON, ``.npz``, PNG bytes, text) and
-marks the result complete by writing ``summary.json`` last.
+marks the result complete by writing ``summary.json`` once its data files are on disk
+(figures and reports, which only render those data, may follow it).
+
+Every file kinred *reads* goes through :func:`read_bytes`, :func:`read_text`,
+:func:`read_json`, :func:`read_npz` or :func:`read_toml`. They turn what can go wrong into
+one-line :class:`~kinred.errors.KinredError` messages naming the path: a missing file, a
+directory, no permission (:class:`~kinred.errors.InvalidInput`); an empty or truncated file,
+bytes that are not UTF-8 (with their offset and line), invalid JSON, a damaged ``.npz``
+archive (:class:`~kinred.errors.DamagedFile`); invalid TOML
+(:class:`~kinred.errors.ConfigError`).
 """
 
 from __future__ import annotations
@@ -24,20 +36,26 @@ import io as _io
 import json
 import os
 import tempfile
+import tomllib
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .errors import InvalidInput
+from .errors import ConfigError, DamagedFile, InvalidInput
 
 __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "atomic_write_json",
     "atomic_write_npz",
+    "read_bytes",
+    "read_text",
     "read_json",
     "read_npz",
+    "read_toml",
     "to_jsonable",
     "ResultFolder",
 ]
@@ -78,12 +96,34 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def _os_reason(exc: OSError) -> str:
+    """Short reason of an OSError, without the path (the caller names it)."""
+    if isinstance(exc, FileNotFoundError):
+        return "no such file or directory"
+    if isinstance(exc, IsADirectoryError):
+        return "is a directory"
+    if isinstance(exc, NotADirectoryError):
+        return "a parent in the path is a file, not a directory"
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    return exc.strerror or str(exc)
+
+
+def _write_error(path: Path, exc: OSError) -> InvalidInput:
+    return InvalidInput(f"{path}: cannot write the file: {_os_reason(exc)}")
+
+
 def _atomic_write(path, writer: Callable[[Any], None]) -> Path:
     """Write through ``writer(binary_file)`` to a temp file, fsync, then ``os.replace``."""
     path = _as_path(path)
+    if path.is_dir():
+        raise InvalidInput(f"{path}: is a directory; give the name of a file to write")
     directory = path.parent
-    directory.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=_TMP_SUFFIX)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=_TMP_SUFFIX)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
     try:
         with os.fdopen(fd, "wb") as fh:
             writer(fh)
@@ -91,11 +131,13 @@ def _atomic_write(path, writer: Callable[[Any], None]) -> Path:
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError):
+            raise _write_error(path, exc) from None
         raise
     _fsync_dir(directory)
     return path
@@ -217,18 +259,168 @@ def atomic_write_npz(path, arrays: Mapping[str, Any] | None = None, /, *, compre
     return _atomic_write(path, writer)
 
 
-def read_json(path):
-    """Read a JSON file written by :func:`atomic_write_json`."""
+def read_bytes(path, *, what: str = "file") -> bytes:
+    """The bytes of the file ``path``.
+
+    ``what`` names the file in messages (``"scene file"``, ``"stage file"``, ...).
+
+    Raises
+    ------
+    InvalidInput
+        The file does not exist, is a directory or cannot be read (the message names it).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> read_bytes(d, what="scene file")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kinred.errors.InvalidInput: ...: is a directory, not a scene file
+    """
     path = _as_path(path)
-    with open(path, "r", encoding="utf-8") as fh:
-        return json.load(fh)
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise InvalidInput(f"{path}: {what} not found") from None
+    except IsADirectoryError:
+        raise InvalidInput(f"{path}: is a directory, not a {what}") from None
+    except OSError as exc:
+        raise InvalidInput(f"{path}: cannot read the {what}: {_os_reason(exc)}") from None
 
 
-def read_npz(path) -> dict[str, np.ndarray]:
-    """Read every array of an ``.npz`` file into memory (no pickle); returns a dict."""
+def read_text(path, *, what: str = "file") -> str:
+    """The UTF-8 text of the file ``path`` (see :func:`read_bytes` for ``what`` and errors).
+
+    Raises
+    ------
+    DamagedFile
+        The bytes are not UTF-8; the message gives the first bad byte, its offset and line.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = atomic_write_bytes(pathlib.Path(tempfile.mkdtemp()) / "b.toml", b"a = 1\\nb = '\\xff'")
+    >>> read_text(p, what="scene file")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kinred.errors.DamagedFile: ...b.toml: not UTF-8 text: byte 0xff at offset 11 (line 2); ...
+    """
+    data = read_bytes(path, what=what)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise DamagedFile(f"{path}: not UTF-8 text: byte 0x{data[exc.start]:02x} at offset "
+                          f"{exc.start} (line {line}); a {what} must be UTF-8",
+                          path=os.fspath(path)) from None
+
+
+def read_json(path, *, what: str = "JSON file"):
+    """Read a JSON file written by :func:`atomic_write_json`.
+
+    Raises
+    ------
+    InvalidInput
+        Missing file, directory, no permission (:func:`read_bytes`).
+    DamagedFile
+        Empty file, not UTF-8, or not a valid JSON document (the message says which, and
+        where).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = atomic_write_text(pathlib.Path(tempfile.mkdtemp()) / "c.json", "")
+    >>> read_json(p)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kinred.errors.DamagedFile: ...c.json: damaged JSON file: empty (0 bytes)
+    """
+    text = read_text(path, what=what)
+    if not text.strip():
+        raise DamagedFile(f"{path}: damaged {what}: empty ({len(text.encode())} bytes)",
+                          path=os.fspath(path))
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        where = (f"{exc.msg} at line {exc.lineno}, column {exc.colno}"
+                 if isinstance(exc, json.JSONDecodeError) else "nested too deeply")
+        raise DamagedFile(f"{path}: damaged {what}: not valid JSON ({where})",
+                          path=os.fspath(path)) from None
+
+
+#: What a damaged or foreign ``.npz`` file makes numpy/zipfile raise while loading it.
+_NPZ_DAMAGE = (zipfile.BadZipFile, EOFError, ValueError, KeyError, zlib.error, OSError)
+
+
+def read_npz(path, *, what: str = ".npz file") -> dict[str, np.ndarray]:
+    """Read every array of an ``.npz`` file into memory (no pickle); returns a dict.
+
+    Raises
+    ------
+    InvalidInput
+        Missing file, directory, no permission.
+    DamagedFile
+        Truncated, empty or otherwise not an ``.npz`` archive of plain arrays (the message
+        names the file and what the decoder reported).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = atomic_write_bytes(pathlib.Path(tempfile.mkdtemp()) / "s.npz", b"PK\\x03\\x04 cut")
+    >>> read_npz(p, what="stage file")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kinred.errors.DamagedFile: ...s.npz: damaged stage file: truncated or not an .npz archive ...
+    """
     path = _as_path(path)
-    with np.load(path, allow_pickle=False) as z:
-        return {key: z[key] for key in z.files}
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # a bare .npy array
+            raise ValueError("a single .npy array")
+        with z:
+            return {key: z[key] for key in z.files}
+    except FileNotFoundError:
+        raise InvalidInput(f"{path}: {what} not found") from None
+    except IsADirectoryError:
+        raise InvalidInput(f"{path}: is a directory, not a {what}") from None
+    except (PermissionError, NotADirectoryError) as exc:
+        raise InvalidInput(f"{path}: cannot read the {what}: {_os_reason(exc)}") from None
+    except _NPZ_DAMAGE as exc:
+        detail = str(exc).split("\n")[0][:120]
+        if "pickle" in detail:  # np.load's guess for bytes that are neither .npz nor .npy
+            detail = "unknown format"
+        raise DamagedFile(f"{path}: damaged {what}: truncated or not an .npz archive "
+                          f"({type(exc).__name__}: {detail})", path=os.fspath(path)) from None
+
+
+def read_toml(path, *, what: str = "TOML file") -> dict:
+    """Parse a UTF-8 TOML file (scene and measure files).
+
+    Raises
+    ------
+    ConfigError
+        Everything that keeps the file from being read and parsed -- missing, a directory, not
+        UTF-8 (offset and line of the first bad byte), invalid TOML -- as one line naming the
+        file.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = atomic_write_text(pathlib.Path(tempfile.mkdtemp()) / "m.toml", "a = [1,")
+    >>> read_toml(p, what="measure file")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    kinred.errors.ConfigError: ...m.toml: invalid TOML: ...
+    """
+    try:
+        text = read_text(path, what=what)
+    except InvalidInput as exc:
+        raise ConfigError(str(exc)) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
 
 
 class ResultFolder:
@@ -236,8 +428,9 @@ class ResultFolder:
 
     Files are addressed by names relative to the folder (``"table.json"``,
     ``"members/000003.npz"``); sub-directories are created on demand. The result is marked
-    complete by :meth:`mark_complete`, which writes ``summary.json`` **last**: a folder
-    without it is an unfinished (or interrupted) result.
+    complete by :meth:`mark_complete`, which writes ``summary.json`` **after its data files**:
+    a folder without it is an unfinished (or interrupted) result. Renderings of the data
+    (figures, ``report.html``) may follow it, so that a failure to draw never loses a result.
 
     Parameters
     ----------
@@ -265,7 +458,11 @@ class ResultFolder:
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
             raise InvalidInput(f"path must be a directory, got the file {str(self.path)!r}")
-        self.path.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InvalidInput(f"{self.path}: cannot create the result folder: "
+                               f"{_os_reason(exc)}") from None
 
     def __repr__(self) -> str:
         return f"ResultFolder({str(self.path)!r})"
@@ -299,7 +496,7 @@ class ResultFolder:
         return atomic_write_npz(self._resolve(name), arrays, **kwargs)
 
     def mark_complete(self, summary: Mapping[str, Any] | None = None) -> Path:
-        """Write ``summary.json`` (last); afterwards :attr:`is_complete` is ``True``."""
+        """Write ``summary.json`` (after the data files); afterwards :attr:`is_complete` is ``True``."""
         return self.write_json(self.SUMMARY, dict(summary or {}))
 
     # -- reading ------------------------------------------------------------------------------
@@ -307,21 +504,21 @@ class ResultFolder:
         """Whether the file ``name`` exists in the folder."""
         return self._resolve(name).is_file()
 
-    def read_json(self, name: str):
-        """Read a JSON file of the folder."""
-        return read_json(self._resolve(name))
+    def read_json(self, name: str, *, what: str = "JSON file"):
+        """Read a JSON file of the folder (errors as :func:`read_json`)."""
+        return read_json(self._resolve(name), what=what)
 
-    def read_npz(self, name: str) -> dict[str, np.ndarray]:
-        """Read an ``.npz`` file of the folder into a dict of arrays."""
-        return read_npz(self._resolve(name))
+    def read_npz(self, name: str, *, what: str = ".npz file") -> dict[str, np.ndarray]:
+        """Read an ``.npz`` file of the folder into a dict of arrays (errors as :func:`read_npz`)."""
+        return read_npz(self._resolve(name), what=what)
 
     def read_bytes(self, name: str) -> bytes:
-        """Read a file's raw bytes."""
-        return self._resolve(name).read_bytes()
+        """Read a file's raw bytes (errors as :func:`read_bytes`)."""
+        return read_bytes(self._resolve(name))
 
     def read_text(self, name: str) -> str:
-        """Read a UTF-8 text file."""
-        return self._resolve(name).read_text(encoding="utf-8")
+        """Read a UTF-8 text file (errors as :func:`read_text`)."""
+        return read_text(self._resolve(name))
 
     def list(self, under: str | None = None) -> list[str]:
         """Sorted relative names (``/``-separated) of the folder's files, temp files excluded."""

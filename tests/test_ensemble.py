@@ -21,7 +21,7 @@ from kinred.ensemble import (
     grid,
     run_ensemble,
 )
-from kinred.errors import InvalidInput, KinredError
+from kinred.errors import DamagedFile, InvalidInput, KinredError, KinredWarning
 from kinred.projection import jl_matrix
 
 REPO = Path(__file__).resolve().parents[1]
@@ -245,6 +245,40 @@ def test_store_refuses_other_runs(tmp_path):
     res = run_ensemble(jl_member, MEMBERS[:2], master_seed=1, store=tmp_path / "new", resume=True,
                        progress=False)
     assert not res.loaded.any()
+
+
+def test_resume_recomputes_damaged_member_files(tmp_path, serial_result):
+    store = tmp_path / "run"
+    run_ensemble(jl_member, MEMBERS, master_seed=2024, store=store, progress=False)
+    members = store / "members"
+    os.truncate(members / "000003.npz", (members / "000003.npz").stat().st_size // 2)
+    (members / "000005.npz").write_bytes(b"")
+    np.savez(members / "000007.npz", Y=np.zeros(2))          # a valid archive, but no __meta__
+    with pytest.warns(KinredWarning) as rec:
+        again = run_ensemble(jl_member, MEMBERS, master_seed=2024, store=store, resume=True,
+                             progress=False)
+    texts = sorted(str(w.message) for w in rec if issubclass(w.category, KinredWarning))
+    assert len(texts) == 3
+    for text, i in zip(texts, (3, 5, 7)):
+        assert text.startswith(f"{members / f'{i:06d}.npz'}: damaged member file: ")
+        assert text.endswith(f"; recomputing member {i}")
+    assert "no __meta__ entry" in texts[2]
+    assert sorted(np.flatnonzero(~again.loaded)) == [3, 5, 7]
+    assert_bitwise_equal(serial_result, again)
+
+
+@pytest.mark.parametrize("content", [b"", b'{"format": "kinred-ens', b"[1, 2]"])
+def test_resume_refuses_damaged_run_json(tmp_path, content):
+    store = tmp_path / "run"
+    run_ensemble(jl_member, MEMBERS[:2], master_seed=1, store=store, progress=False)
+    (store / "run.json").write_bytes(content)
+    with pytest.raises(DamagedFile, match=r"run\.json: damaged store description: .*; it ties the "
+                                          r"member files to a run.*delete the store") as ei:
+        run_ensemble(jl_member, MEMBERS[:2], master_seed=1, store=store, resume=True, progress=False)
+    assert ei.value.path == str(store / "run.json")
+    # without resume the store is refused as before, naming the command-line flag too
+    with pytest.raises(StoreMismatch, match=r"resume=True \(--resume on the command line\)"):
+        run_ensemble(jl_member, MEMBERS[:2], master_seed=1, store=store, progress=False)
 
 
 def test_member_error_names_member_and_keeps_finished(tmp_path):

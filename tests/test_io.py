@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import numpy as np
 import pytest
 
-from kinred.errors import InvalidInput
+from kinred.errors import ConfigError, DamagedFile, InvalidInput
 from kinred.io import (
     ResultFolder,
     atomic_write_bytes,
@@ -17,6 +18,8 @@ from kinred.io import (
     atomic_write_text,
     read_json,
     read_npz,
+    read_text,
+    read_toml,
 )
 
 
@@ -135,3 +138,79 @@ def test_result_folder_validation(tmp_path):
         ResultFolder(tmp_path / "file")
     with pytest.raises(InvalidInput):
         ResultFolder(None)
+
+
+# -- hostile files: every read and write names the path and what is wrong ---------------------
+def test_writing_onto_a_directory_or_under_a_file_is_refused(tmp_path):
+    d = tmp_path / "adir"
+    d.mkdir()
+    (d / "keep.txt").write_text("x")
+    for write in (lambda p: atomic_write_bytes(p, b"x"), lambda p: atomic_write_npz(p, a=1),
+                  lambda p: atomic_write_json(p, {})):
+        with pytest.raises(InvalidInput, match=f"^{re.escape(str(d))}: is a directory; give the name"):
+            write(d)
+    assert _names(d) == ["keep.txt"]
+    with pytest.raises(InvalidInput, match="^.*adir: is a directory"):
+        ResultFolder(tmp_path).write_json("adir", {})
+    (tmp_path / "f.txt").write_text("x")
+    with pytest.raises(InvalidInput, match=r"f\.txt/x\.bin: cannot write the file: "):
+        atomic_write_bytes(tmp_path / "f.txt" / "x.bin", b"x")
+    assert _names(tmp_path) == ["adir", "f.txt"]
+
+
+def test_reading_missing_files_and_directories(tmp_path):
+    missing = tmp_path / "none.json"
+    here = re.escape(str(tmp_path))
+    with pytest.raises(InvalidInput, match=f"^{re.escape(str(missing))}: JSON file not found$"):
+        read_json(missing)
+    with pytest.raises(InvalidInput, match=f"^{here}: is a directory, not a stage file$"):
+        read_npz(tmp_path, what="stage file")
+    with pytest.raises(InvalidInput, match=f"^{here}: is a directory, not a JSON file$"):
+        read_json(tmp_path)
+    with pytest.raises(InvalidInput, match="not found"):
+        read_npz(tmp_path / "none.npz")
+    # TOML files (scenes, measures) report everything as ConfigError
+    with pytest.raises(ConfigError, match=f"^{here}: is a directory, not a scene file$"):
+        read_toml(tmp_path, what="scene file")
+
+
+def test_reading_damaged_text_and_json(tmp_path):
+    p = tmp_path / "t.json"
+    p.write_bytes(b'{"a":\n "\xc3("}')
+    with pytest.raises(DamagedFile, match=r"t\.json: not UTF-8 text: byte 0xc3 at offset 8 "
+                                          r"\(line 2\); a JSON file must be UTF-8") as ei:
+        read_json(p)
+    assert ei.value.path == str(p)
+    with pytest.raises(DamagedFile, match="offset 8"):
+        read_text(p)
+    with pytest.raises(ConfigError, match="not UTF-8 text: byte 0xc3"):
+        read_toml(p)
+    for content, needle in [(b"", r"empty \(0 bytes\)"), (b" \n", r"empty \(2 bytes\)"),
+                            (b'{"digest": "ab',
+                             r"not valid JSON \(Unterminated string .* line 1, column 12\)")]:
+        p.write_bytes(content)
+        with pytest.raises(DamagedFile, match=f"^{re.escape(str(p))}: damaged stage index: {needle}"):
+            read_json(p, what="stage index")
+    p.write_text("a = [1,")
+    with pytest.raises(ConfigError, match="invalid TOML"):
+        read_toml(p)
+
+
+def test_reading_damaged_npz(tmp_path):
+    good = atomic_write_npz(tmp_path / "g.npz", {"x": np.arange(2000.0), "n": 3})
+    raw = good.read_bytes()
+    bad = tmp_path / "b.npz"
+    for cut in (0, 1, 10, 1000, len(raw) // 2, len(raw) - 1):
+        bad.write_bytes(raw[:cut])
+        with pytest.raises(DamagedFile, match=f"^{re.escape(str(bad))}: damaged stage file: "
+                           r"truncated or not an \.npz archive \((EOFError|BadZipFile|ValueError): "):
+            read_npz(bad, what="stage file")
+    flipped = bytearray(raw)
+    flipped[len(raw) // 3] ^= 0xFF                     # inside x's data: the CRC check fails
+    bad.write_bytes(bytes(flipped))
+    with pytest.raises(DamagedFile, match="Bad CRC-32"):
+        read_npz(bad)
+    np.save(tmp_path / "a.npy", np.arange(3))
+    with pytest.raises(DamagedFile, match=r"a single \.npy array"):
+        read_npz(tmp_path / "a.npy")
+    assert np.array_equal(read_npz(good)["x"], np.arange(2000.0))

@@ -22,19 +22,20 @@ The command prints the budget table -- k̄ (coordinates with more than one atom)
 paper's simple recipe for the same ε, and the a-posteriori error: for a tensor product the
 exact W1 under the ℓ1 ground cost (sum of exact marginal 1-D errors), an upper bound of the
 Euclidean W1. ``--out`` writes ``points (N, d)`` and ``weights (N,)`` to an ``.npz`` file
-(atomically: temporary file in the same folder, then ``os.replace``); it refuses when the
-atom count exceeds ``--max-atoms``.
+(:func:`kinred.io.atomic_write_npz`: temporary file in the same folder, then ``os.replace``;
+permissions follow the umask); it refuses an existing directory or a missing folder before
+quantizing, and when the atom count exceeds ``--max-atoms``.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import tempfile
 
 import numpy as np
 
 from ..errors import InvalidInput
+from ..io import atomic_write_npz
 from ..measures import Mixture, TensorProduct, load_measure
 from ..quantize import DEFAULT_MAX_ATOMS, RULE_CONSTANT, Quantization, quantize
 
@@ -105,22 +106,23 @@ def _error_line(q: Quantization, indent: str = "") -> str:
     return f"{indent}{what}: {q.error:.6g}"
 
 
-def _write_npz(path: str, points: np.ndarray, weights: np.ndarray) -> None:
+def _check_out(path: str) -> None:
+    """Refuse an ``--out`` that cannot be a new file, before any work is done."""
+    if os.path.isdir(path):
+        raise InvalidInput(f"--out {path}: is a directory; give the name of the .npz file to write")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise InvalidInput(f"--out folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".kinred-", suffix=".npz.tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, points=points, weights=weights)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+
+
+def _write_npz(path: str, points: np.ndarray, weights: np.ndarray) -> None:
+    _check_out(path)
+    atomic_write_npz(path, points=points, weights=weights)
 
 
 def run(args) -> int:
+    if args.out:
+        _check_out(args.out)
     mu = load_measure(args.measure)
     q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule)
     c = RULE_CONSTANT[args.rule]

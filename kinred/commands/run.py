@@ -1,8 +1,10 @@
 """``kinred run SCENE.toml [--out DIR] [--resume] [--smoke]``: run a scene file.
 
 Writes a result folder (default ``results/<scene name>``): ``stages/*.npz`` as they finish,
-``results.npz``, PNG figures, ``report.html`` and, last, ``summary.json``. ``--resume``
-continues an interrupted run without recomputing finished stages. ``--smoke`` uses the
+``results.npz`` and ``summary.json`` (the run is complete), then PNG figures and
+``report.html`` (a figure that cannot be drawn is a note in the report). ``--resume``
+continues an interrupted run without recomputing finished stages; a damaged stage file is
+named in a warning and recomputed. ``--smoke`` uses the
 scene's ``[smoke]`` sizes (tiny; what the tests run). Scene-file reference:
 ``docs/scene-file.md``.
 """

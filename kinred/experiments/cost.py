@@ -921,41 +921,44 @@ _TITLES = {
 
 
 def write_outputs(result: CostResult, out_dir) -> Path:
-    """Write ``cost.json``, ``cost_<study>.png``, ``cost.txt``, ``report.html``; ``summary.json`` last."""
+    """Write ``cost.json``, ``cost.txt`` and ``summary.json``, then ``cost_<study>.png`` and
+    ``report.html`` (a figure that cannot be drawn becomes a note in the report). Returns the
+    path of ``summary.json``."""
     from ..io import ResultFolder
-    from ..report import Report, figure_png
-    from ..report._figures import pyplot
+    from ..report import Report, draw_figure
 
-    plt = pyplot()
     folder = ResultFolder(out_dir)
     makers = {"projection": _fig_projection, "recovery": _fig_recovery,
               "quantization": _fig_quantization, "integrators": _fig_integrators, "w1": _fig_w1}
     tables = _tables(result)
+    names = [name for name in STUDIES if name in result.studies]
+    text_lines = ["kinred cost -- headline", ""] + [f"- {h['text']}" for h in result.headline.values()]
+    for name in names:
+        text_lines += ["", _TITLES[name], tables[name].to_text()]
+    folder.write_json("cost.json", _jsonable(result.to_json()))
+    folder.write_text("cost.txt", "\n".join(text_lines) + "\n")
+    summary = folder.mark_complete({"study": "cost", "wall_time_s": result.wall_time,
+                                    "headline": {k: v["text"] for k, v in result.headline.items()},
+                                    "machine": result.machine})
     m = result.machine
     rep = Report("kinred cost: what accuracy costs in time",
                  subtitle=f"{m['cpu']}, {m['cores']} logical cores, Python {m['python']}, "
                           f"NumPy {m['numpy']}; total wall time {result.wall_time:.1f} s. "
                           "Timings are wall-clock on this machine (noisy if it is shared).")
     rep.section("Headline", [h["text"] for h in result.headline.values()])
-    text_lines = ["kinred cost -- headline", ""] + [f"- {h['text']}" for h in result.headline.values()]
-    for name in STUDIES:
-        if name not in result.studies:
-            continue
+    for name in names:
         st = result.studies[name]
         setting = ", ".join(f"{k}={v}" for k, v in st.get("setting", {}).items())
         sec = rep.section(_TITLES[name], [setting, f"wall time of this study: "
                                                    f"{result.study_times.get(name, 0.0):.1f} s"])
         sec.tables.append(tables[name])
-        png = figure_png(makers[name](st, plt))
-        folder.write_bytes(f"cost_{name}.png", png)
-        sec.add_figure(_TITLES[name], png)
-        text_lines += ["", _TITLES[name], tables[name].to_text()]
-    folder.write_text("cost.txt", "\n".join(text_lines) + "\n")
+        drawn = draw_figure(f"cost_{name}.png", _TITLES[name],
+                            lambda plt, mk=makers[name], st=st: mk(st, plt))
+        if drawn.png is not None:
+            folder.write_bytes(drawn.name, drawn.png)
+        sec.add_drawn(drawn)
     folder.write_text("report.html", rep.to_html())
-    folder.write_json("cost.json", _jsonable(result.to_json()))
-    return folder.mark_complete({"study": "cost", "wall_time_s": result.wall_time,
-                                 "headline": {k: v["text"] for k, v in result.headline.items()},
-                                 "machine": result.machine})
+    return summary
 
 
 def _jsonable(obj):

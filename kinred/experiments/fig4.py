@@ -194,11 +194,7 @@ def run(cfg: Fig4Config | None = None, *, out_dir=None, progress: bool = False) 
     return result
 
 
-def _figure(result: Fig4Result) -> bytes:
-    from ..report import figure_png
-    from ..report._figures import pyplot
-
-    plt = pyplot()
+def _figure(plt, result: Fig4Result):
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
     for k, e in result.projection_error.items():
         a.plot(result.t, e, label=f"k={k}")
@@ -212,23 +208,27 @@ def _figure(result: Fig4Result) -> bytes:
     b.set_ylabel("relative l1-recovery error of v")
     b.set_title(f"Figure 4 (right): recovery from L projections into k={result.config.k_recovery}")
     b.legend()
-    return figure_png(fig)
+    return fig
 
 
 def write_outputs(result: Fig4Result, out_dir) -> Path:
-    """Write ``fig4.json``, ``fig4.png`` and ``report.html`` (summary last)."""
+    """Write ``fig4.json`` and ``summary.json``, then ``fig4.png`` and ``report.html`` (a figure
+    that cannot be drawn becomes a note in the report). Returns the path of ``summary.json``."""
     from ..io import ResultFolder
-    from ..report import Report, Table
+    from ..report import Report, Table, draw_figure
 
     folder = ResultFolder(out_dir)
-    png = _figure(result)
-    folder.write_bytes("fig4.png", png)
+    folder.write_json("fig4.json", result.to_json())
+    summary = folder.mark_complete({"study": "fig4", "wall_time_s": result.wall_time})
+    drawn = draw_figure("fig4.png", "Figure 4", _figure, result)
+    if drawn.png is not None:
+        folder.write_bytes(drawn.name, drawn.png)
     cfg = result.config
     rep = Report("kinred: the paper's Figure 4 (§3.4.2)",
                  subtitle=f"N={cfg.N}, d={cfg.d}, beta={cfg.beta}, coupling normalize="
                           f"{cfg.normalize!r}, G={cfg.G}, {cfg.steps} Euler steps of {cfg.dt}")
     s = rep.section("Errors over time")
-    s.add_figure("Figure 4", png)
+    s.add_drawn(drawn)
     s.tables.append(Table(["k", "max error", "final error"],
                           [[k, float(e.max()), float(e[-1])] for k, e in result.projection_error.items()],
                           caption="relative projection error of v"))
@@ -237,8 +237,7 @@ def write_outputs(result: Fig4Result, out_dir) -> Path:
                            for L, e in result.recovery_error.items()],
                           caption="relative recovery error of v"))
     folder.write_text("report.html", rep.to_html())
-    folder.write_json("fig4.json", result.to_json())
-    return folder.mark_complete({"study": "fig4", "wall_time_s": result.wall_time})
+    return summary
 
 
 @dataclass(frozen=True)

@@ -248,46 +248,53 @@ def format_table(counts: dict, *, title: str = "") -> str:
     return ((title + "\n") if title else "") + "\n".join(rows)
 
 
-def _figures(result: Table1Result) -> list[tuple[str, bytes]]:
-    from ..report import figure_png
-    from ..report._figures import pyplot
-
-    plt = pyplot()
+def _figure(plt, result: Table1Result, n_fig: int, beta):
     cfg = result.config
+    b = float(beta)
+    ks = cfg.figure_ks.get(beta, cfg.figure_ks.get(b, tuple(cfg.ks[:2])))
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
+    orig = result.gamma[b][cfg.d][0]
+    for ax, k in zip(axes[0], ks):
+        if k not in result.gamma[b]:
+            ax.set_visible(False)
+            continue
+        for g in result.gamma[b][k]:
+            ax.semilogy(result.t, np.maximum(g, 1e-300), lw=0.8, alpha=0.7)
+        ax.semilogy(result.t, np.maximum(orig, 1e-300), "k--", lw=2.5, label=f"original d={cfg.d}")
+        ax.set_title(f"beta={b:g}: Gamma(t), {len(result.gamma[b][k])} projections to k={k}")
+        ax.set_xlabel("t")
+        ax.legend(loc="best")
+    dims = list(result.gamma[b])
+    for ax, col, name in ((axes[1][0], 0, "initial Gamma(0)"),
+                          (axes[1][1], -1, f"final Gamma({result.t[-1]:g})")):
+        for pos, dim in enumerate(dims):
+            vals = result.gamma[b][dim][:, col]
+            ax.semilogy(np.full(vals.shape, pos), np.maximum(vals, 1e-300), "o", ms=4)
+        if col == -1:
+            ax.axhline(cfg.yes_below, ls="--", c="gray")
+            ax.axhline(cfg.no_above, ls="--", c="gray")
+        ax.set_xticks(range(len(dims)), [str(d) for d in dims])
+        ax.set_xlabel("dimension")
+        ax.set_title(f"beta={b:g}: {name} per dimension")
+    fig.suptitle(f"Figure {n_fig} (paper §3.4.1), coupling normalize={cfg.normalize!r}, G={cfg.G:g}")
+    return fig
+
+
+def _figures(result: Table1Result) -> list:
+    """Figures 1-3, each drawn in a guarded call (a list of :class:`kinred.report.DrawnFigure`)."""
+    from ..report import draw_figure
+
     figs = []
-    for n_fig, beta in enumerate(cfg.betas, start=1):
-        b = float(beta)
-        ks = cfg.figure_ks.get(beta, cfg.figure_ks.get(b, tuple(cfg.ks[:2])))
-        fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), layout="constrained")
-        orig = result.gamma[b][cfg.d][0]
-        for ax, k in zip(axes[0], ks):
-            if k not in result.gamma[b]:
-                ax.set_visible(False)
-                continue
-            for g in result.gamma[b][k]:
-                ax.semilogy(result.t, np.maximum(g, 1e-300), lw=0.8, alpha=0.7)
-            ax.semilogy(result.t, np.maximum(orig, 1e-300), "k--", lw=2.5, label=f"original d={cfg.d}")
-            ax.set_title(f"beta={b:g}: Gamma(t), {len(result.gamma[b][k])} projections to k={k}")
-            ax.set_xlabel("t")
-            ax.legend(loc="best")
-        dims = list(result.gamma[b])
-        for ax, col, name in ((axes[1][0], 0, "initial Gamma(0)"), (axes[1][1], -1, f"final Gamma({result.t[-1]:g})")):
-            for pos, dim in enumerate(dims):
-                vals = result.gamma[b][dim][:, col]
-                ax.semilogy(np.full(vals.shape, pos), np.maximum(vals, 1e-300), "o", ms=4)
-            if col == -1:
-                ax.axhline(cfg.yes_below, ls="--", c="gray")
-                ax.axhline(cfg.no_above, ls="--", c="gray")
-            ax.set_xticks(range(len(dims)), [str(d) for d in dims])
-            ax.set_xlabel("dimension")
-            ax.set_title(f"beta={b:g}: {name} per dimension")
-        fig.suptitle(f"Figure {n_fig} (paper §3.4.1), coupling normalize={cfg.normalize!r}, G={cfg.G:g}")
-        figs.append((f"figure{n_fig}_beta{b:g}.png", figure_png(fig)))
+    for n_fig, beta in enumerate(result.config.betas, start=1):
+        name = f"figure{n_fig}_beta{float(beta):g}.png"
+        figs.append(draw_figure(name, name, _figure, result, n_fig, beta))
     return figs
 
 
 def write_outputs(result: Table1Result, out_dir) -> Path:
-    """Write ``table1.json``, ``table1.txt``, the figures and ``report.html`` to ``out_dir``."""
+    """Write ``gamma.npz``, ``table1.txt``, ``table1.json`` and ``summary.json``, then the
+    figures and ``report.html`` to ``out_dir`` (a figure that cannot be drawn becomes a note
+    in the report). Returns the path of ``summary.json``."""
     from ..io import ResultFolder
     from ..report import Report, Table
 
@@ -300,6 +307,9 @@ def write_outputs(result: Table1Result, out_dir) -> Path:
     paper = format_table({b: v for b, v in PAPER_TABLE1.items() if b in result.counts},
                          title="Table 1 (paper)")
     folder.write_text("table1.txt", text + "\n\n" + paper + "\n")
+    folder.write_json("table1.json", result.to_json())
+    summary = folder.mark_complete({"study": "table1", "wall_time_s": result.wall_time,
+                                    "counts": result.to_json()["counts"]})
     figs = _figures(result)
     rep = Report("kinred: the paper's Table 1 (§3.4.1)",
                  subtitle=f"N={cfg.N}, d={cfg.d}, {cfg.n_projections} {cfg.kind} projections per k, "
@@ -314,10 +324,9 @@ def write_outputs(result: Table1Result, out_dir) -> Path:
                                 [[k, *c, *paper_b.get(k, ("", "", ""))] for k, c in v.items()],
                                 caption=f"beta = {b:g}"))
     figsec = rep.section("Figures 1-3")
-    for name, png in figs:
-        folder.write_bytes(name, png)
-        figsec.add_figure(name, png)
+    for drawn in figs:
+        if drawn.png is not None:
+            folder.write_bytes(drawn.name, drawn.png)
+        figsec.add_drawn(drawn)
     folder.write_text("report.html", rep.to_html())
-    folder.write_json("table1.json", result.to_json())
-    return folder.mark_complete({"study": "table1", "wall_time_s": result.wall_time,
-                                 "counts": result.to_json()["counts"]})
+    return summary

@@ -41,7 +41,6 @@ from __future__ import annotations
 import math
 import numbers
 import os
-import tomllib
 
 import numpy as np
 from scipy import stats
@@ -201,14 +200,12 @@ def load_measure(path: str | os.PathLike) -> Measure:
     Raises
     ------
     ConfigError
-        Missing file, invalid TOML, or any invalid key/value (the message names file and key).
+        Missing file, a directory, not UTF-8, invalid TOML, or any invalid key/value (the
+        message names file and key).
     """
+    from ..io import read_toml
+
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise InvalidInput(f"path must be a str or os.PathLike, got {path!r}")
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: measure file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
-    return measure_from_dict(data, source=path)
+    return measure_from_dict(read_toml(path, what="measure file"), source=path)

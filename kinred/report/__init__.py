@@ -5,6 +5,8 @@ backend), so that the numerical core never pays for it.
 """
 
 from ._html import Report, Section, Table, validate_report_html
-from ._figures import figure_png
+from ._figures import (DrawnFigure, draw_figure, figure_png, finite_values, fit_log_axis, legend,
+                       log_plot, log_values)
 
-__all__ = ["Report", "Section", "Table", "figure_png", "validate_report_html"]
+__all__ = ["Report", "Section", "Table", "figure_png", "validate_report_html", "DrawnFigure",
+           "draw_figure", "log_plot", "log_values", "finite_values", "fit_log_axis", "legend"]

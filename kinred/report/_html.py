@@ -54,17 +54,42 @@ class Table:
 
 @dataclass
 class Section:
-    """A heading, paragraphs of text, tables and PNG figures (bytes, with captions)."""
+    """A heading, paragraphs of text, tables and figures.
+
+    ``figures`` holds ``(caption, png bytes, None)`` for a drawn figure and
+    ``(caption, None, note)`` for a figure that could not be drawn (the note is shown in its
+    place).
+    """
 
     title: str
     text: Sequence[str] = ()
     tables: list = field(default_factory=list)
-    figures: list = field(default_factory=list)  # (caption, png bytes)
+    figures: list = field(default_factory=list)
 
     def add_figure(self, caption: str, png: bytes) -> None:
+        """Embed a PNG figure (bytes) with its caption."""
         if not isinstance(png, (bytes, bytearray)) or not bytes(png).startswith(_PNG_MAGIC):
             raise InvalidInput(f"figure {caption!r} must be PNG bytes")
-        self.figures.append((caption, bytes(png)))
+        self.figures.append((caption, bytes(png), None))
+
+    def add_drawn(self, drawn) -> None:
+        """Add a :class:`~kinred.report.DrawnFigure`: its PNG, or a note saying why it is missing.
+
+        Examples
+        --------
+        >>> from kinred.report import DrawnFigure
+        >>> s = Section("Figures")
+        >>> s.add_drawn(DrawnFigure("bound.png", "the bound", None, "OverflowError: too big"))
+        >>> s.figures[0][2]  # doctest: +ELLIPSIS
+        'Figure bound.png (the bound) could not be drawn: OverflowError: too big. The numbers...'
+        """
+        if drawn.png is not None:
+            self.add_figure(drawn.caption, drawn.png)
+            return
+        self.figures.append((drawn.caption, None,
+                             f"Figure {drawn.name} ({drawn.caption}) could not be drawn: "
+                             f"{drawn.error}. The numbers it shows are in the tables and data "
+                             "files of this result."))
 
 
 @dataclass
@@ -98,7 +123,8 @@ class Report:
             "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;"
             "padding:3px 8px;text-align:right}caption{font-style:italic}"
-            "figure{margin:1em 0}img{max-width:100%}</style>",
+            "figure{margin:1em 0}img{max-width:100%}"
+            ".figure-note{border-left:4px solid #c60;padding:0.3em 0.8em;background:#fff6ee}</style>",
             "</head><body>",
             f"<h1>{html.escape(self.title)}</h1>",
         ]
@@ -109,7 +135,11 @@ class Report:
             parts.append(f"<h2>{html.escape(s.title)}</h2>")
             parts.extend(f"<p>{html.escape(t)}</p>" for t in s.text)
             parts.extend(t.to_html() for t in s.tables)
-            for cap, png in s.figures:
+            for cap, png, note in s.figures:
+                if png is None:
+                    parts.append(f'<p class="figure-note"><strong>Missing figure.</strong> '
+                                 f"{html.escape(note)}</p>")
+                    continue
                 b64 = base64.b64encode(png).decode("ascii")
                 parts.append(
                     f'<figure><img alt="{html.escape(cap)}" src="data:image/png;base64,{b64}">'
