@@ -4,21 +4,57 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import pickle
 
 import numpy as np
 import pytest
 
 from kinred.errors import InvalidInput
-from kinred.experiments.cost import CostConfig, pareto_front, run, time_to_reach
+from kinred.experiments import cost
+from kinred.experiments.cost import (REGISTRY, STUDIES, CostConfig, pareto_front, run,
+                                     time_to_reach)
+from kinred.experiments.cost._base import registry
 from kinred.io import ResultFolder
 from kinred.report import validate_report_html
 
 
+class _CountingBar:
+    """Stands in for the progress bar: counts the updates of each study."""
+
+    def __init__(self, total, enabled):
+        self.total, self.counts, self.study = total, {}, None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def set_postfix_str(self, name):
+        self.study = name
+
+    def update(self, n):
+        self.counts[self.study] = self.counts.get(self.study, 0) + n
+
+
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
+def smoke_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("cost-smoke")
-    result = run(CostConfig.smoke(), out_dir=out, progress=False)
-    return result, ResultFolder(out)
+    bars = []
+
+    def counting_bar(total, enabled):
+        bars.append(_CountingBar(total, enabled))
+        return bars[-1]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cost, "progress_bar", counting_bar)
+        result = run(CostConfig.smoke(), out_dir=out, progress=False)
+    return result, ResultFolder(out), bars[0]
+
+
+@pytest.fixture(scope="module")
+def smoke(smoke_run):
+    return smoke_run[:2]
 
 
 def _slope(x, y):
@@ -37,6 +73,7 @@ def test_result_folder_complete(smoke):
     assert set(data["headline"]) == {"projection", "precision", "recovery", "quantization",
                                      "integrators", "w1"}
     assert data["machine"]["cores"] >= 1 and data["wall_time_s"] > 0
+    assert data["config"]["configs"]["recovery"]["Ls"] == [1, 3, 5]
     summary = folder.read_json("summary.json")
     assert summary["study"] == "cost" and summary["headline"]["quantization"].startswith("the delayed")
     # summary.json follows the data files and precedes the figures and the report
@@ -124,6 +161,24 @@ def test_integrator_orders(smoke):
         assert rs[-1]["error"] < 100 * rs[-1]["rtol"]
 
 
+def test_every_deterministic_integrator_is_priced(smoke):
+    from kinred.integrate import TABLES
+
+    result, _ = smoke
+    rows = result.studies["integrators"]["rows"]
+    assert {r["method"] for r in rows} == set(TABLES)
+    # adaptive (swept over rtol) exactly when the Butcher table has an error estimate
+    for r in rows:
+        assert (r["rtol"] is not None) == (TABLES[r["method"]].E is not None), r
+
+
+def test_progress_total_is_the_work_done(smoke_run):
+    result, _, bar = smoke_run
+    cfg = result.config
+    assert bar.counts == {n: REGISTRY[n].n_units(cfg.configs[n]) for n in STUDIES}
+    assert bar.total == sum(bar.counts.values()) > len(STUDIES)
+
+
 def test_w1_methods_agree(smoke):
     result, _ = smoke
     rows = result.studies["w1"]["rows"]
@@ -145,14 +200,53 @@ def test_pareto_and_time_to_reach():
 
 
 def test_config_validation():
-    with pytest.raises(InvalidInput, match="rec_Ls"):
-        CostConfig.smoke(rec_Ls=(1, 6))
+    with pytest.raises(InvalidInput, match=r"recovery\.Ls"):
+        CostConfig.smoke(recovery={"Ls": (1, 6)})
     with pytest.raises(InvalidInput, match="studies"):
         CostConfig.smoke(studies=("nope",))
-    with pytest.raises(InvalidInput, match="proj_steps"):
-        CostConfig.smoke(proj_steps=55)
+    with pytest.raises(InvalidInput, match=r"projection\.steps"):
+        CostConfig.smoke(projection={"steps": 55})
     with pytest.raises(InvalidInput, match="cfg"):
         run({"quick": True}, progress=False)
+
+
+def test_study_settings_are_validated():
+    from kinred.experiments.cost.recovery import RecoveryConfig
+
+    with pytest.raises(InvalidInput, match="recovery has no setting 'nope'"):
+        CostConfig.smoke(recovery={"nope": 1})
+    with pytest.raises(InvalidInput, match="study must be one of"):
+        CostConfig.smoke(recover={"Ls": (1,)})
+    with pytest.raises(InvalidInput, match=r"projection\.kinds must be non-empty"):
+        CostConfig.smoke(projection={"kinds": ()})
+    with pytest.raises(InvalidInput, match=r"integrators\.rtols must be a tuple"):
+        CostConfig.smoke(integrators={"rtols": 1e-3})
+    with pytest.raises(InvalidInput, match="seed must be >= 0, got -1"):
+        CostConfig(seed=-1)
+    with pytest.raises(InvalidInput, match=r"configs\['w1'\] must be a W1Config"):
+        CostConfig(configs={"w1": RecoveryConfig()})
+    with pytest.raises(InvalidInput, match="preset must be one of"):
+        CostConfig.preset("medium")
+    # a per-study config replaces the preset of that study only
+    cfg = CostConfig.smoke(recovery=RecoveryConfig.smoke(Ls=(1, 3)))
+    assert cfg.configs["recovery"].Ls == (1, 3) and cfg.configs["w1"] == CostConfig.smoke().configs["w1"]
+
+
+def test_registry_rejects_repeated_names_and_streams():
+    w1 = REGISTRY["w1"]
+    with pytest.raises(InvalidInput, match="repeats"):
+        registry(w1, w1)
+    with pytest.raises(InvalidInput, match="Study objects"):
+        registry(w1, "pairsum")
+
+    class HalfWritten(cost.Study):  # a new knob that forgot its figure and its random streams
+        name, title, Config = "pairsum", "Pair sums", w1.Config
+        n_units = run = table = headline = lambda self, *a, **k: None
+
+    with pytest.raises(InvalidInput, match="HalfWritten does not define key, figure"):
+        registry(w1, HalfWritten())
+    assert STUDIES == tuple(registry(*REGISTRY.values()))
+    assert len({s.key for s in REGISTRY.values()}) == len(REGISTRY)
 
 
 def test_cli_smoke(tmp_path, capsys):
@@ -182,4 +276,6 @@ def test_every_preset_is_a_valid_config(make):
     # each preset passes its own validation (a quick preset once did not: rec_steps=100 with
     # rec_every=125), so `kinred cost`, `--quick` and `--smoke` all start
     cfg = make()
-    assert cfg.rec_steps % cfg.rec_every == 0 and cfg.proj_steps % cfg.proj_every == 0
+    rec, proj = cfg.configs["recovery"], cfg.configs["projection"]
+    assert rec.steps % rec.every == 0 and proj.steps % proj.every == 0
+    assert pickle.loads(pickle.dumps(cfg)) == cfg

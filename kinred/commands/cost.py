@@ -4,14 +4,15 @@ Usage::
 
     kinred cost [--quick | --smoke] [--out DIR] [--only STUDY ...] [--no-progress]
 
-Measures five studies (see :mod:`kinred.experiments.cost`): projected dimension k and
-projection kind, number of projections L and solver tolerance of the recovery, atoms of the
-quantization (isotropic vs decaying widths: the curse and the delayed curse), time step and
-integrator, and the W1 method. Each is drawn as a Pareto plot (error vs time, log-log) with its
-numbers in a table. The result folder (default ``results/cost`` or ``results/cost-quick``) holds
-``cost.json``, ``cost.txt``, ``summary.json`` (written once the numbers are on disk),
-``cost_<study>.png`` and ``report.html``. The full run takes a few minutes; ``--quick``
-about a minute; ``--smoke`` a few seconds (tests). The headline sentences are printed at the end.
+Measures one study per knob (the registry of :mod:`kinred.experiments.cost`): projected
+dimension k and projection kind, number of projections L and solver tolerance of the recovery,
+atoms of the quantization (isotropic vs decaying widths: the curse and the delayed curse), time
+step and integrator, and the W1 method. Each is drawn as a Pareto plot (error vs time,
+log-log) with its numbers in a table. The result folder (default ``results/cost`` or
+``results/cost-quick``) holds ``cost.json``, ``cost.txt``, ``summary.json`` (written once the
+numbers are on disk), ``cost_<study>.png`` and ``report.html``. The full run takes a few
+minutes; ``--quick`` about a minute; ``--smoke`` a few seconds (tests). The headline sentences
+are printed at the end.
 """
 
 from __future__ import annotations
