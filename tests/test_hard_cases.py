@@ -270,3 +270,12 @@ def test_noise_does_not_trigger_the_guard():
     for seed in range(3):
         simulate(sc, rng.normal(size=(3, 1)), rng.normal(size=(3, 1)), (0, 100), 0.01,
                  method="euler_maruyama", seed=seed, save=SaveAt(every=1000))
+
+
+def test_adaptive_non_finite_drift_is_a_divergence():
+    from kinred.dynamics import Field
+    field = Field(lambda t, x, v: np.where(t > 0.3, np.nan, -v), translation_invariant=True)
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.0)), field])
+    with pytest.raises(SimulationDiverged, match=r"t=0\.3 .*non-finite at the current state "
+                                                 r"however small the step.*Field"):
+        simulate(sc, *_data(3, 2), (0, 1), 0.1, method="rk45")

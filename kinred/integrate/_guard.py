@@ -327,8 +327,8 @@ def step_hint(scene, table: RKTable, dt: float, states):
     scene : Scene
     table : RKTable
         The method (its real stability interval ``β_m``).
-    dt : float
-        The step that failed.
+    dt : float or None
+        The step that failed (None for adaptive methods, whose step is not the user's).
     states : sequence of (t, x, v)
         The initial state, then e.g. the current one (only its positions are used, see
         :func:`_radii`); non-finite states are skipped.
@@ -341,7 +341,8 @@ def step_hint(scene, table: RKTable, dt: float, states):
         The largest step it recommends (None without an estimate).
     """
     states = [st for st in states if np.all(np.isfinite(st[1]))]
-    generic = f"reduce dt (now {dt:g}), or use an adaptive method (method='rk45')."
+    generic = ("reduce dt" + (f" (now {dt:g})" if dt is not None else "")
+               + ", or use an adaptive method (method='rk45').")
     if not states:
         return generic, None
     rho, om2, parts, unknown = _radii(scene, states)
@@ -364,4 +365,5 @@ def step_hint(scene, table: RKTable, dt: float, states):
         out.append(f"no estimate for {', '.join(unknown)}")
     if not cands:
         return generic, None
-    return f"dt = {dt:g} is too large: " + "; ".join(out) + ".", min(cands)
+    head = f"dt = {dt:g} is too large: " if dt is not None else ""
+    return head + "; ".join(out) + ".", min(cands)

@@ -295,9 +295,12 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         counter["rhs"] += 1
         return scene._rhs(xs, vs, tt)
 
-    def diverged(tt, step, xs, vs, why=None):
+    def diverged(tt, step, xs, vs, why=None, hint=None):
         total_s = f" of {n_steps}" if n_steps is not None else ""
-        hint, stable = step_hint(scene, table, dt, [(t0, x0, v0), (tt, xs, vs)])
+        stable = None
+        if hint is None:
+            hint, stable = step_hint(scene, table, None if adaptive else dt,
+                                     [(t0, x0, v0), (tt, xs, vs)])
         why = why or "the state became non-finite (NaN/Inf/overflow)"
         raise SimulationDiverged(
             f"simulation diverged at t={tt:.6g} (step {step}{total_s}, method={method!r}, "
@@ -330,7 +333,8 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
             else:
                 def on_nonfinite(tt, step, xs, vs):
                     diverged(tt, step, xs, vs, "the drift is non-finite at the current state "
-                             "however small the step")
+                             "however small the step", "the scene's field is singular or "
+                             "undefined there: check its effects (a Field, a custom kernel)")
 
                 run = Adaptive(f, table, rtol, atol, max_steps, check, on_nonfinite, bar)
                 x, v = run.run(t0, t1, x, v, dt, save_times, record)
