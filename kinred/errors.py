@@ -58,20 +58,24 @@ def _rebuild_damaged(message, path):
 
 
 class SimulationDiverged(KinredError, FloatingPointError):
-    """A simulation produced NaN/Inf or overflowed.
+    """A simulation produced NaN/Inf, overflowed, or grew past a bound of the exact flow.
 
     Attributes
     ----------
     t : float
-        Time at which the non-finite state was detected.
+        Time at which the divergence was detected.
     step : int
         Index of the step that produced it.
+    stable_dt : float or None
+        A step the message recommends (estimated from the states), when one is known.
     """
 
-    def __init__(self, message: str, *, t: float | None = None, step: int | None = None):
+    def __init__(self, message: str, *, t: float | None = None, step: int | None = None,
+                 stable_dt: float | None = None):
         super().__init__(message)
         self.t = t
         self.step = step
+        self.stable_dt = stable_dt
 
 
 class NotConverged(KinredError, RuntimeError):

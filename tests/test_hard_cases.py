@@ -1,11 +1,19 @@
-"""Hard cases: coincident agents, huge translations, extreme beta, N = 1, d = 1, k >= d, 1e-30."""
+"""Hard cases: coincident agents, huge translations, extreme beta, N = 1, d = 1, k >= d, 1e-30;
+unstable explicit steps and stiff adaptive runs (issue 14)."""
+
+import math
+import signal
+import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
-from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene,
+from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse, Noise, Scene,
                              SelfPropulsion)
-from kinred.integrate import SaveAt, simulate
+from kinred.errors import InvalidInput, NotConverged, SimulationDiverged
+from kinred.integrate import BS32, DOPRI5, EULER, HEUN, RK4, SaveAt, simulate
+from kinred.integrate._guard import energy_budget, real_stability
 from kinred.observables import gamma
 
 
@@ -317,3 +325,183 @@ def test_cli_paper_table1_existing_folder_says_resume_flag(tmp_path, capsys):
                        "--no-progress"], capsys)
     assert rc == 2
     _one_error_line(err, "StoreMismatch", out / "store", "--resume")
+# ---------------------------------------------------------------------------------------
+# Divergence and endless adaptive runs (issue 14): an explicit step that is unstable for the
+# scene stops with SimulationDiverged as soon as the velocity fluctuation exceeds what the
+# exact flow allows; a stiff adaptive run ends in NotConverged within seconds.
+
+
+@contextmanager
+def _deadline(seconds):
+    """Fail (instead of hanging) when the block runs longer than ``seconds``."""
+    def boom(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s")
+    old = signal.signal(signal.SIGALRM, boom)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _stiff_alignment(beta):
+    return Scene([Alignment(CuckerSmale(G=1e6, beta=beta))], normalize="sum")
+
+
+@pytest.mark.parametrize("beta,t1", [(0.0, 15.0), (0.5, 5.0)])
+def test_unstable_euler_alignment_stops_at_the_first_step(beta, t1):
+    # the audit's reproducers: the old code returned Γ = 1.2, 8e14, ..., 1e296 (reached at
+    # t = 10), inf for beta = 0 and Γ = 4e28 without error for beta = 0.5
+    x0, v0 = _data(50, 4)
+    with pytest.raises(SimulationDiverged) as info:
+        simulate(_stiff_alignment(beta), x0, v0, (0, t1), 0.5)
+    e = info.value
+    msg = str(e)
+    assert e.step == 1 and e.t == 0.5
+    assert "velocity fluctuation Γ" in msg and "grew from 1.31" in msg and "dt < 2/ρ̂" in msg
+    # the hint is the Gershgorin bound 2 max_i Σ_j c_j g_ij at the initial positions; for
+    # beta = 0 it is 2 G (N - 1) in closed form, and 2/that is below 2/ρ(L) = 2/(G N)
+    if beta == 0.0:
+        assert e.stable_dt == pytest.approx(2.0 / (2.0 * 1e6 * 49), rel=1e-12)
+        assert e.stable_dt < 2.0 / (1e6 * 50)
+    assert f"{e.stable_dt:.3g}" in msg
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.5])
+def test_following_the_stable_dt_hint_runs_and_dissipates(beta):
+    x0, v0 = _data(50, 4)
+    sc = _stiff_alignment(beta)
+    with pytest.raises(SimulationDiverged) as info:
+        simulate(sc, x0, v0, (0, 5), 0.5)
+    dt = info.value.stable_dt
+    tr = simulate(sc, x0, v0, (0, 200 * dt), dt)          # no error
+    g = tr.observables["gamma"]
+    assert np.all(np.diff(g) <= 1e-12 * g[0])               # Γ never grows
+    assert g[-1] < 1e-20 * g[0]                              # the stiff coupling aligns at once
+
+
+def test_marginally_unstable_euler_is_stopped_before_a_wrong_verdict():
+    # Table-1 setting with dt = 0.2: h·ρ > 2 at the start, Γ grows 58x and then settles at
+    # about 50 (no flocking) when the exact flow flocks; the old code returned that silently
+    x0, v0 = _data(200, 20)
+    sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], "sum")
+    with pytest.raises(SimulationDiverged) as info:
+        simulate(sc, x0, v0, (0, 30), 0.2, save=SaveAt(every=50))
+    e = info.value
+    assert e.step <= 3 and "velocity fluctuation Γ" in str(e)
+    # the hint (0.035 here) holds: the paper's dt = 0.02 is below it, and dt = 0.03 runs
+    assert 0.02 < e.stable_dt < 0.2
+    dt = 30 / math.ceil(30 / e.stable_dt)
+    tr = simulate(sc, x0, v0, (0, 30), dt, save=SaveAt(every=10))
+    assert tr.observables["gamma"][-1] < 1e-20
+
+
+def test_morse_overshoot_stops_at_the_first_step():
+    # Ca = 1e6: one Euler step flings the agents out of the potential (old code: Γ = 1.2e10
+    # returned without error); the energy bound Γ <= Γ(0) + Ca + Cr is exceeded 10^4 times
+    x0, v0 = _data(50, 4)
+    sc = Scene([AttractionRepulsion(Morse(Ca=1e6))], "mean")
+    with pytest.raises(SimulationDiverged) as info:
+        simulate(sc, x0, v0, (0, 5), 0.5)
+    msg = str(info.value)
+    assert info.value.step == 1
+    assert "velocity fluctuation Γ" in msg and "Morse" in msg and "dt ≲ 0.2/ω̂" in msg
+    assert 0 < info.value.stable_dt < 1e-3
+
+
+def test_self_propulsion_blow_up_is_caught_before_overflow():
+    # old code: non-finite at step 5; now at step 1 with the quantity that grew
+    x0, v0 = _data(50, 4)
+    sc = Scene([AttractionRepulsion(Morse(Ca=1e6)), SelfPropulsion()], "sum")
+    with pytest.raises(SimulationDiverged) as info:
+        simulate(sc, x0, v0, (0, 5), 0.05)
+    msg = str(info.value)
+    assert info.value.step == 1 and "velocity second moment" in msg
+    assert "self-propulsion" in msg and "dt*b*max|v|^2" in msg
+
+
+def test_stiff_rk45_ends_in_not_converged_within_seconds():
+    # the old code ran on (h ~ 7e-8, max_steps = 10^7 hard-coded): nothing after 120 s
+    x0, v0 = _data(50, 4)
+    t = time.perf_counter()
+    with _deadline(60.0), pytest.raises(NotConverged) as info:
+        simulate(_stiff_alignment(0.0), x0, v0, (0, 1), 0.5, method="rk45")
+    assert time.perf_counter() - t < 30.0                   # measured 0.2-0.4 s
+    msg = str(info.value)
+    assert "stopped at t=" in msg and "stiff" in msg and "max_steps=100000" in msg
+    assert "accepted" in msg and "rejected" in msg and "Hint:" in msg
+    # the Lipschitz estimate is the spectral radius G N = 5e7 of the alignment Laplacian
+    assert "ρ̂ = 5e+07" in msg
+
+
+def test_adaptive_step_budget_and_floor():
+    x0, v0 = _data(8, 2)
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.5)), SelfPropulsion(0.5, 0.2)], "mean")
+    with pytest.raises(NotConverged,
+                       match=r"stopped at t=0\.\d+ of t1=1: the step budget max_steps=20 is spent"):
+        simulate(sc, x0, v0, (0, 1), 0.1, method="rk45", rtol=1e-10, atol=1e-12, max_steps=20)
+    # a tolerance below round-off cannot be met: the step shrinks to the floor 1e-12·span
+    with pytest.raises(NotConverged, match=r"below the floor 1e-12"):
+        simulate(sc, x0, v0, (0, 1), 0.1, method="rk23", rtol=1e-30, atol=0.0)
+    with pytest.raises(InvalidInput, match="max_steps must be >= 1, got 0"):
+        simulate(sc, x0, v0, (0, 1), 0.1, method="rk45", max_steps=0)
+
+
+def test_adaptive_progress_bar_counts_time(capsys):
+    x0, v0 = _data(8, 2)
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.5))], "mean")
+    simulate(sc, x0, v0, (0, 2), 0.5, method="rk45", progress=True)
+    err = capsys.readouterr().err
+    assert "t-t0=2/2" in err
+
+
+def test_real_stability_intervals():
+    # closed forms: Euler and Heun 2; every 3-stage order-3 method (BS32) 2.5127;
+    # RK4 2.7853; Dormand–Prince 5(4) 3.3066
+    assert real_stability(EULER) == 2.0 and real_stability(HEUN) == 2.0
+    assert real_stability(BS32) == pytest.approx(2.5127, abs=1e-4)
+    assert real_stability(RK4) == pytest.approx(2.7853, abs=1e-4)
+    assert real_stability(DOPRI5) == pytest.approx(3.3066, abs=1e-4)
+
+
+def test_legitimate_runs_pass_the_guard():
+    # Table-1-like (N = 200, d = 20, G = 0.8, sum, dt = 0.02, 300 steps), a softened
+    # D'Orsogna mill and self-propulsion with alignment: the guard is active and silent
+    x0, v0 = _data(200, 20)
+    for beta in (1.5, 1.7):
+        sc = Scene([Alignment(CuckerSmale(0.8, beta))], "sum")
+        assert energy_budget(sc, 200, 20) is not None
+        g = simulate(sc, x0, v0, (0, 6), 0.02, save=SaveAt(every=30)).observables["gamma"]
+        assert np.all(np.diff(g) <= 0)
+    x0, v0 = _data(100, 2, seed=3)
+    mill = Scene([AttractionRepulsion(Morse(25.0, 2.0, 50.0, 0.5, soft=0.25)),
+                  SelfPropulsion(1.0, 0.5)], "mean")
+    assert energy_budget(mill, 100, 2) is not None
+    for method in ("euler", "rk4"):
+        tr = simulate(mill, x0, v0, (0, 20), 0.05, method=method, save=SaveAt(every=100))
+        # a mill: speeds near sqrt(a/b) = 1.41 around a resting centre, so Γ near a/b = 2
+        assert abs(tr.observables["gamma"][-1] - 2.0) < 0.1
+    sp = Scene([Alignment(CuckerSmale(1.0, 0.5)), SelfPropulsion(1.0, 0.5)], "mean")
+    tr = simulate(sp, x0, 3 * v0, (0, 10), 0.01, save=SaveAt(every=100, states="v"))
+    assert np.allclose(np.linalg.norm(tr.v[-1], axis=1), np.sqrt(2.0), rtol=0.05)
+
+
+def test_noise_does_not_trigger_the_guard():
+    # a few agents and a long Euler–Maruyama run: the noise term of the budget is an
+    # expectation, the realized Γ fluctuates around it
+    rng = np.random.default_rng(1)
+    sc = Scene([Alignment(CuckerSmale(1.0, 0.5)), Noise(1.0)], "mean")
+    assert energy_budget(sc, 3, 1) is not None
+    for seed in range(3):
+        simulate(sc, rng.normal(size=(3, 1)), rng.normal(size=(3, 1)), (0, 100), 0.01,
+                 method="euler_maruyama", seed=seed, save=SaveAt(every=1000))
+
+
+def test_adaptive_non_finite_drift_is_a_divergence():
+    from kinred.dynamics import Field
+    field = Field(lambda t, x, v: np.where(t > 0.3, np.nan, -v), translation_invariant=True)
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.0)), field])
+    with pytest.raises(SimulationDiverged, match=r"t=0\.3 .*non-finite at the current state "
+                                                 r"however small the step.*Field"):
+        simulate(sc, *_data(3, 2), (0, 1), 0.1, method="rk45")

@@ -13,9 +13,11 @@ import numpy as np
 from .. import observables as _obs
 from .._rng import as_generator
 from .._validate import as_array, as_choice, as_float, as_int, as_span
-from ..errors import InvalidInput, NotConverged, SimulationDiverged
-from ..dynamics import Scene, SelfPropulsion
-from ._tables import TABLES, RKTable
+from ..errors import InvalidInput, SimulationDiverged
+from ..dynamics import Scene
+from ._guard import Guard, step_hint
+from ._rk import Adaptive, default_max_steps, rk_step
+from ._tables import TABLES
 
 __all__ = ["simulate", "SaveAt", "Trajectory", "METHODS"]
 
@@ -134,25 +136,60 @@ def _observable_list(spec, order):
     return out
 
 
-def _hint(scene, dt, v):
-    for e in scene.effects:
-        if isinstance(e, SelfPropulsion) and e.b > 0 and v is not None:
-            vmax = float(np.max(np.einsum("ij,ij->i", v, v))) if np.all(np.isfinite(v)) else float("nan")
-            return (f"explicit step too large for self-propulsion with b={e.b}: stability of "
-                    f"(a - b|v|^2) v needs dt*b*max|v|^2 small (<~1); at the start "
-                    f"dt*b*max|v0|^2 = {dt * e.b * vmax:.3g}. Reduce dt or use method='rk45'.")
-    return "reduce dt, or use an adaptive method (method='rk45') with rtol/atol."
+def _save_plan(save, t0, t1, dt, method, adaptive):
+    """``(n_steps, save_idx, save_times)``; fixed steps: indices on the grid, adaptive: times."""
+    span = t1 - t0
+    if not adaptive:
+        nf = span / dt
+        n_steps = int(round(nf))
+        if n_steps < 1 or abs(n_steps - nf) > 1e-9 * max(1.0, nf):
+            raise InvalidInput(f"(t1 - t0)/dt must be a positive integer for method={method!r}, "
+                               f"got {span!r}/{dt!r} = {nf!r}")
+        if save.t is not None:
+            idx = np.rint((save.t - t0) / dt).astype(np.int64)
+            off = np.abs(t0 + idx * dt - save.t)
+            if np.any(off > 1e-9 * max(1.0, abs(t1))) or np.any(idx < 0) or np.any(idx > n_steps):
+                bad = save.t[int(np.argmax(off))] if np.any(off > 1e-9 * max(1.0, abs(t1))) else \
+                    save.t[(idx < 0) | (idx > n_steps)][0]
+                raise InvalidInput(f"SaveAt t must lie on the step grid t0 + n*dt within t_span "
+                                   f"for method={method!r}; got t={bad!r}")
+            save_idx = np.unique(np.concatenate([[0], idx, [n_steps]]))
+        else:
+            every = save.every or 1
+            save_idx = np.unique(np.concatenate([np.arange(0, n_steps + 1, every), [n_steps]]))
+        save_times = t0 + save_idx * dt
+        save_times[-1] = t1
+        return n_steps, save_idx, save_times
+    if save.t is not None:
+        if save.t[0] < t0 or save.t[-1] > t1:
+            raise InvalidInput(f"SaveAt t must lie in t_span [{t0}, {t1}], got "
+                               f"[{save.t[0]}, {save.t[-1]}]")
+        save_times = np.unique(np.concatenate([[t0], save.t, [t1]]))
+    else:
+        every = save.every or 1
+        m = int(math.floor(span / (every * dt) + 1e-9))
+        save_times = np.unique(np.concatenate([t0 + np.arange(m + 1) * every * dt, [t1]]))
+        save_times = save_times[save_times <= t1]
+    return None, None, save_times
 
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
              method: str = "euler", save: SaveAt | None = None, seed=None, progress: bool = False,
-             rtol: float = 1e-6, atol: float = 1e-9) -> Trajectory:
+             rtol: float = 1e-6, atol: float = 1e-9, max_steps: int | None = None) -> Trajectory:
     r"""Integrate a scene from ``(x0, v0)`` over ``t_span``.
 
     Forward Euler is the paper's scheme (eq. (1.6), label ``eq:eul1``; on a projected scene
     it is eq. (2.4)–(2.5)). When every effect is translation invariant the run is carried out
     in coordinates relative to the initial centroid (positions are shifted back when saved),
     which keeps distances accurate for clouds far from the origin.
+
+    Every accepted step is checked in ``O(N·d)``: the state must stay finite and, for scenes
+    whose energy budget is known (alignment with ``g ≥ 0``, Morse attraction–repulsion,
+    self-propulsion, drifts, noise), the velocity fluctuation ``Γ`` (or ``Σᵢwᵢ|vᵢ|²`` with
+    self-propulsion) must stay within 100 times an a-priori bound of the exact flow (for pure
+    alignment: ``Γ`` never grows). An explicit step that is unstable for the scene (e.g. Euler
+    with ``dt·ρ > 2``, ``ρ`` the spectral radius of the alignment Laplacian) is stopped within
+    a few steps of the first amplification. See ``kinred.integrate._guard``.
 
     Parameters
     ----------
@@ -172,9 +209,13 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     seed : None, int, SeedSequence or Generator
         Noise seed (Euler–Maruyama).
     progress : bool
-        Show a tqdm progress bar.
+        Show a tqdm progress bar (steps for fixed-step methods; the time reached out of
+        ``t1 − t0``, with its rate and remaining time, for adaptive ones).
     rtol, atol : float
         Tolerances of adaptive methods.
+    max_steps : int, optional
+        Budget of accepted plus rejected steps of adaptive methods; default
+        ``max(100 000, 1000·⌈(t1 − t0)/dt⌉)``.
 
     Returns
     -------
@@ -183,7 +224,13 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     Raises
     ------
     SimulationDiverged
-        The state became NaN/Inf; the message names the time, the step and a hint.
+        The state became NaN/Inf or grew past the bound of the exact flow; the message names
+        the time, the step, the quantity that grew and a hint with a stable step estimated
+        from the states (also in the attribute ``stable_dt``).
+    NotConverged
+        An adaptive method spent ``max_steps``, its step fell below ``1e-12·(t1 − t0)``, or
+        the problem is stiff and the budget cannot reach ``t1``; the message names the time
+        reached, the step size, the accepted and rejected steps and a hint.
 
     Examples
     --------
@@ -212,50 +259,18 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         raise InvalidInput(f"save must be a SaveAt, got {save!r}")
     rtol = as_float(rtol, "rtol", low=0.0, low_open=True)
     atol = as_float(atol, "atol", low=0.0)
+    adaptive = method in _ADAPTIVE
+    max_steps = (default_max_steps(t1 - t0, dt) if max_steps is None
+                 else as_int(max_steps, "max_steps", low=1))
     rng = as_generator(seed) if scene.stochastic else None
     obs = _observable_list(save.observables, scene.order)
     n_agents, dim = x0.shape
     w = scene.agent_weights(n_agents)
+    n_steps, save_idx, save_times = _save_plan(save, t0, t1, dt, method, adaptive)
 
     shift = _obs.centre(x0, w) if scene.translation_invariant else None
     x = x0 - shift if shift is not None else x0.copy()
     v = v0.copy() if v0 is not None else None
-
-    adaptive = method in _ADAPTIVE
-    span = t1 - t0
-    if not adaptive:
-        nf = span / dt
-        n_steps = int(round(nf))
-        if n_steps < 1 or abs(n_steps - nf) > 1e-9 * max(1.0, nf):
-            raise InvalidInput(f"(t1 - t0)/dt must be a positive integer for method={method!r}, "
-                               f"got {span!r}/{dt!r} = {nf!r}")
-        if save.t is not None:
-            idx = np.rint((save.t - t0) / dt).astype(np.int64)
-            off = np.abs(t0 + idx * dt - save.t)
-            if np.any(off > 1e-9 * max(1.0, abs(t1))) or np.any(idx < 0) or np.any(idx > n_steps):
-                bad = save.t[int(np.argmax(off))] if np.any(off > 1e-9 * max(1.0, abs(t1))) else \
-                    save.t[(idx < 0) | (idx > n_steps)][0]
-                raise InvalidInput(f"SaveAt t must lie on the step grid t0 + n*dt within t_span "
-                                   f"for method={method!r}; got t={bad!r}")
-            save_idx = np.unique(np.concatenate([[0], idx, [n_steps]]))
-        else:
-            every = save.every or 1
-            save_idx = np.unique(np.concatenate([np.arange(0, n_steps + 1, every), [n_steps]]))
-        save_times = t0 + save_idx * dt
-        save_times[-1] = t1
-    else:
-        if save.t is not None:
-            if save.t[0] < t0 or save.t[-1] > t1:
-                raise InvalidInput(f"SaveAt t must lie in t_span [{t0}, {t1}], got "
-                                   f"[{save.t[0]}, {save.t[-1]}]")
-            save_times = np.unique(np.concatenate([[t0], save.t, [t1]]))
-        else:
-            every = save.every or 1
-            m = int(math.floor(span / (every * dt) + 1e-9))
-            save_times = np.unique(np.concatenate([t0 + np.arange(m + 1) * every * dt, [t1]]))
-            save_times = save_times[save_times <= t1]
-        n_steps = None
-        save_idx = None
 
     T = len(save_times)
     rec = {name: [] for name, _ in obs}
@@ -264,6 +279,8 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     X = np.empty((T, n_agents, dim)) if want_x else None
     V = np.empty((T, n_agents, dim)) if want_v else None
     counter = {"rhs": 0}
+    table = TABLES["euler" if method == "euler_maruyama" else method]
+    guard = Guard(scene, v0, w, t0) if scene.order == 2 else None
 
     def record(j, tt, xs, vs):
         xt = xs + shift if shift is not None else xs
@@ -278,172 +295,89 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         counter["rhs"] += 1
         return scene._rhs(xs, vs, tt)
 
-    def diverged(tt, step, total):
-        total_s = f" of {total}" if total is not None else ""
+    def diverged(tt, step, xs, vs, why=None, hint=None):
+        total_s = f" of {n_steps}" if n_steps is not None else ""
+        stable = None
+        if hint is None:
+            hint, stable = step_hint(scene, table, None if adaptive else dt,
+                                     [(t0, x0, v0), (tt, xs, vs)])
+        why = why or "the state became non-finite (NaN/Inf/overflow)"
         raise SimulationDiverged(
             f"simulation diverged at t={tt:.6g} (step {step}{total_s}, method={method!r}, "
-            f"dt={dt:g}): the state became non-finite (NaN/Inf/overflow). Hint: "
-            f"{_hint(scene, dt, v0)}", t=float(tt), step=int(step))
+            f"dt={dt:g}): {why}. Hint: {hint}", t=float(tt), step=int(step), stable_dt=stable)
+
+    def check(tt, step, xs, vs):
+        s = float(np.sum(xs)) + (float(np.sum(vs)) if vs is not None else 0.0)
+        if not math.isfinite(s):
+            diverged(tt, step, xs, vs)
+        why = guard.check(tt, vs) if guard is not None else None
+        if why is not None:
+            diverged(tt, step, xs, vs, why)
 
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=n_steps if n_steps is not None else T - 1, desc=f"simulate[{method}]")
+        bar = (tqdm(total=n_steps, desc=f"simulate[{method}]") if not adaptive else
+               tqdm(total=t1 - t0, desc=f"simulate[{method}]", unit="t",
+                    bar_format="{l_bar}{bar}| t-t0={n:.4g}/{total:.4g} "
+                               "[{elapsed}<{remaining}]"))
 
     record(0, t0, x, v)
     n_rej = 0
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        if not adaptive:
-            table = TABLES["euler" if method == "euler_maruyama" else method]
-            # one-stage methods update the (private) state in place through one scratch
-            # array: the same rounding as x + dt·dx, no fresh multi-megabyte array per step
-            tmp = np.empty_like(x) if table.stages == 1 else None
-            j = 1
-            for n in range(1, n_steps + 1):
-                tn = t0 + (n - 1) * dt
-                if tmp is not None:
-                    dx, dv = f(tn, x, v)
-                    np.multiply(dx, dt, out=tmp)     # dx may be v itself: x first, then v
-                    x += tmp
-                    if v is not None:
-                        np.multiply(dv, dt, out=tmp)
-                        v += tmp
-                else:
-                    x, v = _rk_step(f, table, tn, x, v, dt)
-                if rng is not None:
-                    dX, dV = scene.noise_increment(rng, n_agents, dim, dt)
-                    if dX is not None:
-                        x += dX
-                    if dV is not None:
-                        v += dV
-                s = float(np.sum(x)) + (float(np.sum(v)) if v is not None else 0.0)
-                if not math.isfinite(s):
-                    diverged(t0 + n * dt, n, n_steps)
-                if j < T and n == save_idx[j]:
-                    record(j, save_times[j], x, v)
-                    j += 1
-                if bar is not None:
-                    bar.update(1)
-            n_done = n_steps
-        else:
-            table = TABLES[method]
-            x, v, n_done, n_rej = _adaptive(f, table, t0, t1, x, v, dt, rtol, atol, save_times,
-                                            record, diverged, bar)
-    if bar is not None:
-        bar.close()
+    try:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            if not adaptive:
+                x, v = _fixed(f, table, scene, rng, t0, dt, n_steps, x, v, save_idx,
+                              save_times, record, check, bar)
+                n_done = n_steps
+            else:
+                def on_nonfinite(tt, step, xs, vs):
+                    diverged(tt, step, xs, vs, "the drift is non-finite at the current state "
+                             "however small the step", "the scene's field is singular or "
+                             "undefined there: check its effects (a Field, a custom kernel)")
+
+                run = Adaptive(f, table, rtol, atol, max_steps, check, on_nonfinite, bar)
+                x, v = run.run(t0, t1, x, v, dt, save_times, record)
+                n_done, n_rej = run.n_acc, run.n_rej
+    finally:
+        if bar is not None:
+            bar.close()
     observables = types.MappingProxyType({k: np.array(vals) for k, vals in rec.items()})
     return Trajectory(t=np.asarray(save_times, dtype=float), observables=observables, x=X, v=V,
                       method=method, n_steps=int(n_done), n_rhs_evals=counter["rhs"],
                       wall_time=time.perf_counter() - t_start, dt=dt, n_rejected=int(n_rej))
 
 
-def _stages(f, table: RKTable, t, x, v, h, k_first=None):
-    """Stage derivatives ``[(dxₛ, dvₛ)]`` of one explicit RK step of size ``h`` from ``(x, v)``.
-
-    ``k_first`` reuses a known first stage (FSAL pairs, or a rejected adaptive step).
-    """
-    ks = []
-    for s in range(table.stages):
-        if s == 0 and k_first is not None:
-            ks.append(k_first)
-            continue
-        xs, vs = x, v
-        if s:
-            xs = x.copy()
-            vs = v.copy() if v is not None else None
-            for j in range(s):
-                a = table.A[s, j]
-                if a:
-                    xs += (h * a) * ks[j][0]
-                    if v is not None:
-                        vs += (h * a) * ks[j][1]
-        dx, dv = f(t + table.C[s] * h, xs, vs)
-        if dx is vs:
-            dx = dx.copy()
-        ks.append((dx, dv))
-    return ks
-
-
-def _combine(x, v, ks, weights, h):
-    """``(x + h Σ wₛ dxₛ, v + h Σ wₛ dvₛ)`` as new arrays."""
-    xn = x.copy()
-    vn = v.copy() if v is not None else None
-    for s, w in enumerate(weights):
-        if w:
-            xn += (h * w) * ks[s][0]
-            if v is not None:
-                vn += (h * w) * ks[s][1]
-    return xn, vn
-
-
-def _rk_step(f, table: RKTable, t, x, v, h):
-    """One explicit RK step of ``(x, v)``; returns new arrays."""
-    if table.stages == 1:
-        dx, dv = f(t, x, v)
-        xn = x + h * dx
-        vn = v + h * dv if v is not None else None
-        return xn, vn
-    return _combine(x, v, _stages(f, table, t, x, v, h), table.B, h)
-
-
-def _adaptive(f, table, t0, t1, x, v, h, rtol, atol, save_times, record, diverged, bar):
-    """Embedded-pair integration hitting every save time exactly (step-to-hit)."""
-    q = min(table.order, table.error_order) + 1
-    t = t0
+def _fixed(f, table, scene, rng, t0, dt, n_steps, x, v, save_idx, save_times, record, check,
+           bar):
+    """The fixed-step loop (explicit RK, Euler–Maruyama); returns the final ``(x, v)``."""
+    n_agents, dim = x.shape
+    T = len(save_times)
+    # one-stage methods update the (private) state in place through one scratch
+    # array: the same rounding as x + dt·dx, no fresh multi-megabyte array per step
+    tmp = np.empty_like(x) if table.stages == 1 else None
     j = 1
-    n_acc = n_rej = 0
-    k_first = None
-    max_steps = 10_000_000
-    while j < len(save_times):
-        target = save_times[j]
-        hh = min(h, target - t)
-        hit = hh >= target - t
-        ks = _stages(f, table, t, x, v, hh, k_first)
-        xn, vn = _combine(x, v, ks, table.B, hh)
-        ex, ev = _combine(np.zeros_like(x), np.zeros_like(v) if v is not None else None, ks,
-                          table.E, hh)
-        sc = atol + rtol * np.maximum(np.abs(x), np.abs(xn))
-        err2 = float(np.sum((ex / sc) ** 2))
-        cnt = ex.size
-        if v is not None:
-            scv = atol + rtol * np.maximum(np.abs(v), np.abs(vn))
-            err2 += float(np.sum((ev / scv) ** 2))
-            cnt += ev.size
-        err = math.sqrt(err2 / cnt)
-        if not math.isfinite(err):
-            if hh < 1e-12 * max(1.0, abs(t)):
-                diverged(t, n_acc + 1, None)
-            h = hh * 0.2
-            n_rej += 1
-            k_first = ks[0]
-            continue
-        if err <= 1.0:
-            t = target if hit else t + hh
-            x, v = xn, vn
-            n_acc += 1
-            k_first = (ks[-1][0], ks[-1][1]) if table.fsal else None
-            if k_first is not None and k_first[0] is None:
-                k_first = None
-            s_ = float(np.sum(x)) + (float(np.sum(v)) if v is not None else 0.0)
-            if not math.isfinite(s_):
-                diverged(t, n_acc, None)
-            if hit:
-                record(j, target, x, v)
-                j += 1
-                if bar is not None:
-                    bar.update(1)
-            fac = 5.0 if err == 0 else min(5.0, max(0.2, 0.9 * err ** (-1.0 / q)))
-            if hit:
-                h = max(h, hh * fac) if hh < h else hh * fac
-            else:
-                h = hh * fac
+    for n in range(1, n_steps + 1):
+        tn = t0 + (n - 1) * dt
+        if tmp is not None:
+            dx, dv = f(tn, x, v)
+            np.multiply(dx, dt, out=tmp)     # dx may be v itself: x first, then v
+            x += tmp
+            if v is not None:
+                np.multiply(dv, dt, out=tmp)
+                v += tmp
         else:
-            n_rej += 1
-            h = hh * max(0.2, 0.9 * err ** (-1.0 / q))
-            k_first = ks[0]
-        if h < 1e-14 * max(1.0, abs(t)):
-            diverged(t, n_acc + 1, None)
-        if n_acc + n_rej > max_steps:
-            raise NotConverged(f"adaptive integration exceeded {max_steps} steps at t={t:.6g}; "
-                               "loosen rtol/atol or check the scene")
-    return x, v, n_acc, n_rej
+            x, v = rk_step(f, table, tn, x, v, dt)
+        if rng is not None:
+            dX, dV = scene.noise_increment(rng, n_agents, dim, dt)
+            if dX is not None:
+                x += dX
+            if dV is not None:
+                v += dV
+        check(t0 + n * dt, n, x, v)
+        if j < T and n == save_idx[j]:
+            record(j, save_times[j], x, v)
+            j += 1
+        if bar is not None:
+            bar.update(1)
+    return x, v
