@@ -1,6 +1,7 @@
 """Exact optimal transport through POT (the only module of kinred that imports ``ot``).
 
-POT is imported lazily (``import ot`` takes about a second).
+POT is imported lazily, inside the solvers (its import is slow: docs/performance.md,
+section W1).
 
 Two pitfalls of calling POT directly are handled here:
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,8 +24,8 @@ METHODS = ("auto", "exact", "exact-lazy", "exact-1d", "product-l1", "bracket")
 #: above it, it switches to POT's lazy solver ``ot.lp.emd2_lazy`` (memory O(N + M)).
 DEFAULT_MAX_DENSE_BYTES = 2**27
 
-#: "auto" solves the exact LP only while N·M stays below this (about 6000 × 6000 atoms, tens of
-#: seconds for the network simplex); beyond it, it returns a certified bracket.
+#: "auto" solves the exact LP only while N·M stays below this (6000 × 6000 atoms; its cost at
+#: this size is in docs/performance.md, section W1); beyond it, it returns a certified bracket.
 DEFAULT_MAX_EXACT_PAIRS = 36_000_000
 
 _GRID_ATOMS = 2000
@@ -37,7 +38,7 @@ def _n_atoms(m):
     return m.n if isinstance(m, Pts) else (int(m.grid_size()) if isinstance(m, Prod) and m.all_atomic else None)
 
 
-def _as_pts(m, max_pairs_side: float, name: str):
+def _as_pts(m, max_pairs_side: float):
     """Atoms of ``m`` if it is atomic (or an all-atomic product small enough), else None."""
     if isinstance(m, Pts):
         return m
@@ -148,7 +149,7 @@ def w1(
           (8·N·M bytes), ``numItermax = max(100000, 50·N·M)``; raises
           :class:`~kinred.errors.NotConverged` if POT still stops early.
         * ``"exact-lazy"`` -- the same LP with ``ot.lp.emd2_lazy`` (costs computed on the fly,
-          memory O(N + M), about 4× slower).
+          memory O(N + M), slower than the dense solver: docs/performance.md, section W1).
         * ``"exact-1d"`` -- d = 1: sorted merge for atoms, :math:`\int|F - G|` by quadrature for
           continuous laws (exact to ~1e-13).
         * ``"product-l1"`` -- two product measures (``TensorProduct``, a full tensor grid of
@@ -216,44 +217,86 @@ def w1(
     dual_sample = as_int(dual_sample, "dual_sample", low=0)
     grid_atoms = as_int(grid_atoms, "grid_atoms", low=1)
     A, B, unit = normalize_pair(mu, nu, a, b)
-    d = A.dim
-    if isinstance(A, Prod) and d == 1:
-        A = A.factors[0]
-    if isinstance(B, Prod) and d == 1:
-        B = B.factors[0]
-    n_atoms = (_n_atoms(A), _n_atoms(B))
-    rng_holder = [seed]
-    auto = method == "auto"
-
-    def rng():
-        if not isinstance(rng_holder[0], np.random.Generator):
-            rng_holder[0] = as_generator(rng_holder[0])
-        return rng_holder[0]
-
+    A, B = _unwrap_1d(A), _unwrap_1d(B)
+    problem = _Problem(
+        A=A, B=B, d=A.dim, n_atoms=(_n_atoms(A), _n_atoms(B)), unit=unit, metric=metric,
+        product=product, max_dense_bytes=max_dense_bytes, max_exact_pairs=max_exact_pairs,
+        num_iter_max=num_iter_max, n_projections=n_projections, leaf_size=leaf_size,
+        dual_sample=dual_sample, grid_atoms=grid_atoms, rng=_LazyRng(seed))
+    chosen = method
     if method == "auto":
-        if d == 1:
-            method = "exact-1d"
-        else:
-            PA = _as_pts(A, min(max_exact_pairs, _MAX_MATERIALIZE), "mu")
-            PB = _as_pts(B, min(max_exact_pairs, _MAX_MATERIALIZE), "nu")
-            if PA is not None and PB is not None and PA.n * PB.n <= max_exact_pairs:
-                A, B = PA, PB
-                n_atoms = (A.n, B.n)
-                method = "exact" if 8 * A.n * B.n <= max_dense_bytes else "exact-lazy"
-            elif metric == "l1":
-                if _marginals(A, product) is not None and _marginals(B, product) is not None:
-                    method = "product-l1"
-                else:
-                    raise InvalidInput(
-                        f"metric='l1' with method='auto' needs atomic measures with N·M <= "
-                        f"max_exact_pairs={max_exact_pairs} or two product measures"
-                    )
-            else:
-                method = "bracket"
-    res = _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
-               n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs, unit)
-    note = f"auto chose {res.method}: {res.note}" if auto else res.note
+        chosen, problem = _resolve_auto(problem)
+    res = _RUNNERS[chosen](problem)
+    note = f"auto chose {res.method}: {res.note}" if method == "auto" else res.note
     return _in_units(res, unit, note)
+
+
+class _LazyRng:
+    """The bracket's generator, made from ``seed`` on first use (the exact methods draw nothing)."""
+
+    def __init__(self, seed):
+        self._seed = seed
+
+    def __call__(self) -> np.random.Generator:
+        if not isinstance(self._seed, np.random.Generator):
+            self._seed = as_generator(self._seed)
+        return self._seed
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """One validated :func:`w1` call: both measures in the common frame and the options.
+
+    ``A``, ``B`` are internal forms (:mod:`kinred.distance._inputs`) of dimension ``d``;
+    ``n_atoms`` their atom counts (None for a continuous law); ``unit`` the scale of the
+    common frame (it only scales the numbers quoted in notes; results are multiplied by it in
+    :func:`w1`). The other fields are the validated keyword arguments of :func:`w1`.
+    """
+
+    A: object
+    B: object
+    d: int
+    n_atoms: tuple
+    unit: float
+    metric: str
+    product: bool
+    max_dense_bytes: int
+    max_exact_pairs: int
+    num_iter_max: int | None
+    n_projections: int
+    leaf_size: int
+    dual_sample: int
+    grid_atoms: int
+    rng: _LazyRng
+
+
+def _unwrap_1d(m):
+    """The factor of a one-factor product (d = 1 measures are compared as 1-D laws)."""
+    return m.factors[0] if isinstance(m, Prod) and m.dim == 1 else m
+
+
+def _resolve_auto(p: _Problem) -> tuple[str, _Problem]:
+    """The method "auto" picks for ``p``, and ``p`` with its atoms materialized for an exact LP.
+
+    exact-1d in d = 1; the exact LP (dense below ``max_dense_bytes``, lazy above) for atomic
+    measures (or small all-atomic products) with ``N·M ≤ max_exact_pairs``; otherwise
+    product-l1 for ``metric="l1"`` and a bracket for the Euclidean metric.
+    """
+    if p.d == 1:
+        return "exact-1d", p
+    side = min(p.max_exact_pairs, _MAX_MATERIALIZE)
+    PA, PB = _as_pts(p.A, side), _as_pts(p.B, side)
+    if PA is not None and PB is not None and PA.n * PB.n <= p.max_exact_pairs:
+        method = "exact" if 8 * PA.n * PB.n <= p.max_dense_bytes else "exact-lazy"
+        return method, replace(p, A=PA, B=PB, n_atoms=(PA.n, PB.n))
+    if p.metric != "l1":
+        return "bracket", p
+    if _marginals(p.A, p.product) is None or _marginals(p.B, p.product) is None:
+        raise InvalidInput(
+            f"metric='l1' with method='auto' needs atomic measures with N·M <= "
+            f"max_exact_pairs={p.max_exact_pairs} or two product measures"
+        )
+    return "product-l1", p
 
 
 def _to_units(value: float, unit: float, what: str) -> float:
@@ -275,119 +318,167 @@ def _in_units(res: W1Result, unit: float, note: str) -> W1Result:
     return W1Result(value, res.method, res.exact, lower, upper, res.n_atoms, note, res.metric)
 
 
-def _run(method, A, B, d, n_atoms, metric, product, max_dense_bytes, num_iter_max,
-         n_projections, leaf_size, dual_sample, grid_atoms, rng, max_exact_pairs, unit):
-    """Run one (resolved) method on measures in the common frame; ``unit`` only scales notes."""
-    if method in ("exact", "exact-lazy"):
-        PA = _as_pts(A, _MAX_MATERIALIZE, "mu")
-        PB = _as_pts(B, _MAX_MATERIALIZE, "nu")
-        if PA is None or PB is None:
-            raise InvalidInput(
-                f"method={method!r} needs two atomic measures (Atomic, Dirac, Empirical1D, arrays "
-                "of points, or a TensorProduct of atomic factors); use 'exact-1d' for a continuous "
-                "law in d = 1 or 'bracket'/'auto' otherwise"
-            )
-        n_atoms = (PA.n, PB.n)
-        if method == "exact":
-            need = 8 * PA.n * PB.n
-            if need > max_dense_bytes:
-                raise TooLarge(
-                    f"method='exact' needs a dense {PA.n} x {PB.n} cost matrix ({need / 2**20:.0f} MiB) "
-                    f"above max_dense_bytes={max_dense_bytes} ({max_dense_bytes / 2**20:.0f} MiB); use "
-                    "method='exact-lazy' or raise max_dense_bytes"
-                )
-            v = emd_dense(PA.points, PA.weights, PB.points, PB.weights, metric=metric,
-                          num_iter_max=num_iter_max)
-            return _exact_result(v, "exact", n_atoms,
-                                 f"POT ot.emd2 on the dense {metric} cost matrix (network simplex, optimal)",
-                                 metric)
-        v = emd_lazy(PA.points, PA.weights, PB.points, PB.weights, metric=metric,
-                     num_iter_max=num_iter_max)
-        return _exact_result(v, "exact-lazy", n_atoms,
-                             f"POT ot.lp.emd2_lazy, {metric} costs computed on the fly (optimal)", metric)
+def _atoms_for_lp(p: _Problem, method: str):
+    """Both measures as atoms for the exact LP ``method``, or InvalidInput naming the fix."""
+    PA, PB = _as_pts(p.A, _MAX_MATERIALIZE), _as_pts(p.B, _MAX_MATERIALIZE)
+    if PA is None or PB is None:
+        raise InvalidInput(
+            f"method={method!r} needs two atomic measures (Atomic, Dirac, Empirical1D, arrays "
+            "of points, or a TensorProduct of atomic factors); use 'exact-1d' for a continuous "
+            "law in d = 1 or 'bracket'/'auto' otherwise"
+        )
+    return PA, PB
 
-    if method == "exact-1d":
-        if d != 1:
-            raise InvalidInput(f"method='exact-1d' needs measures on ℝ¹, got dim {d}")
-        v, err, how = w1_1d(A, B)
-        note = f"exact 1-D W1 ({how})"
-        if err > 0:
-            note += f"; quadrature error estimate {err * unit:.1e}"
-        return _exact_result(v, "exact-1d", n_atoms, note, metric)
 
-    if method == "product-l1":
-        ma, mb = _marginals(A, product), _marginals(B, product)
-        if ma is None or mb is None:
-            which = "mu" if ma is None else "nu"
-            raise InvalidInput(
-                f"method='product-l1' needs two product measures; {which} is neither a "
-                "TensorProduct nor a full tensor grid of atoms with product weights (pass "
-                "product=True to use the coordinate marginals of atoms you know to be a product)"
-            )
-        parts = [w1_1d(fa, fb)[0] for fa, fb in zip(ma, mb)]
-        v = float(sum(parts))
-        return _exact_result(
-            v, "product-l1", n_atoms,
-            f"sum of {d} exact marginal W1s = exact W1 for the l1 ground cost (Lemma 4.1); an "
-            "upper bound for the Euclidean W1", "l1")
+def _run_exact(p: _Problem) -> W1Result:
+    """``ot.emd2`` on the dense cost matrix, refused above ``max_dense_bytes`` (TooLarge)."""
+    PA, PB = _atoms_for_lp(p, "exact")
+    need = 8 * PA.n * PB.n
+    if need > p.max_dense_bytes:
+        raise TooLarge(
+            f"method='exact' needs a dense {PA.n} x {PB.n} cost matrix ({need / 2**20:.0f} MiB) "
+            f"above max_dense_bytes={p.max_dense_bytes} ({p.max_dense_bytes / 2**20:.0f} MiB); "
+            "use method='exact-lazy' or raise max_dense_bytes"
+        )
+    v = emd_dense(PA.points, PA.weights, PB.points, PB.weights, metric=p.metric,
+                  num_iter_max=p.num_iter_max)
+    note = f"POT ot.emd2 on the dense {p.metric} cost matrix (network simplex, optimal)"
+    return _exact_result(v, "exact", (PA.n, PB.n), note, p.metric)
 
-    # bracket
-    if metric != "euclidean":
+
+def _run_exact_lazy(p: _Problem) -> W1Result:
+    """``ot.lp.emd2_lazy``: the same LP with costs computed on the fly (memory O(N + M))."""
+    PA, PB = _atoms_for_lp(p, "exact-lazy")
+    v = emd_lazy(PA.points, PA.weights, PB.points, PB.weights, metric=p.metric,
+                 num_iter_max=p.num_iter_max)
+    return _exact_result(v, "exact-lazy", (PA.n, PB.n),
+                         f"POT ot.lp.emd2_lazy, {p.metric} costs computed on the fly (optimal)",
+                         p.metric)
+
+
+def _run_exact_1d(p: _Problem) -> W1Result:
+    """Exact W1 on ℝ¹: sorted merge of atoms, ``∫|F − G|`` by quadrature for laws."""
+    if p.d != 1:
+        raise InvalidInput(f"method='exact-1d' needs measures on ℝ¹, got dim {p.d}")
+    v, err, how = w1_1d(p.A, p.B)
+    note = f"exact 1-D W1 ({how})"
+    if err > 0:
+        note += f"; quadrature error estimate {err * p.unit:.1e}"
+    return _exact_result(v, "exact-1d", p.n_atoms, note, p.metric)
+
+
+def _run_product_l1(p: _Problem) -> W1Result:
+    """Σⱼ W1(μⱼ, νⱼ) of the coordinate marginals: the exact ℓ1 W1 of two products (Lemma 4.1)."""
+    ma, mb = _marginals(p.A, p.product), _marginals(p.B, p.product)
+    if ma is None or mb is None:
+        which = "mu" if ma is None else "nu"
+        raise InvalidInput(
+            f"method='product-l1' needs two product measures; {which} is neither a "
+            "TensorProduct nor a full tensor grid of atoms with product weights (pass "
+            "product=True to use the coordinate marginals of atoms you know to be a product)"
+        )
+    parts = [w1_1d(fa, fb)[0] for fa, fb in zip(ma, mb)]
+    v = float(sum(parts))
+    return _exact_result(
+        v, "product-l1", p.n_atoms,
+        f"sum of {p.d} exact marginal W1s = exact W1 for the l1 ground cost (Lemma 4.1); an "
+        "upper bound for the Euclidean W1", "l1")
+
+
+_L1_UPPER = "product-l1 (sum of marginal W1s, |.|_2 <= |.|_1)"
+_ROOT_UPPER = "the product of the monotone marginal couplings, (sum_j W2_j^2)^(1/2)"
+_L1_LOWER = "product-l1 / sqrt(d)"
+
+
+def _run_bracket(p: _Problem) -> W1Result:
+    """Certified ``lower ≤ W1 ≤ upper`` (Euclidean): atoms, or a continuous product in d > 1.
+
+    Two products also contribute their marginal bounds: ``Σⱼ W1ⱼ`` and ``(Σⱼ W2ⱼ²)^(1/2)``
+    from above (couplings of the whole), ``Σⱼ W1ⱼ / √d`` from below.
+    """
+    if p.metric != "euclidean":
         raise InvalidInput("method='bracket' is for the Euclidean ground metric; got metric='l1'")
-    if d == 1:
-        v, err, how = w1_1d(A, B)
-        return W1Result(v, "bracket", False, v, v, n_atoms, f"d = 1: exact 1-D W1 ({how})")
-    PA = _as_pts(A, _MAX_MATERIALIZE, "mu")
-    PB = _as_pts(B, _MAX_MATERIALIZE, "nu")
-    mA, mB = _marginals(A, False), _marginals(B, False)
-    extra = extra_lo = None
-    l1 = None
-    if mA is not None and mB is not None:
-        l1, root = product_upper(mA, mB)
-        if root < l1:
-            extra = ("the product of the monotone marginal couplings, (sum_j W2_j^2)^(1/2)", root)
-        else:
-            extra = ("product-l1 (sum of marginal W1s, |.|_2 <= |.|_1)", l1)
-        extra_lo = ("product-l1 / sqrt(d)", l1 / math.sqrt(d))
+    if p.d == 1:
+        v, err, how = w1_1d(p.A, p.B)
+        return W1Result(v, "bracket", False, v, v, p.n_atoms, f"d = 1: exact 1-D W1 ({how})")
+    PA, PB = _as_pts(p.A, _MAX_MATERIALIZE), _as_pts(p.B, _MAX_MATERIALIZE)
+    mA, mB = _marginals(p.A, False), _marginals(p.B, False)
+    marginal_bounds = product_upper(mA, mB) if mA is not None and mB is not None else None
     if PA is not None and PB is not None:
-        lower, upper, note = bracket_atoms(PA, PB, rng(), n_projections=n_projections,
-                                           leaf_size=leaf_size, dual_sample=dual_sample,
-                                           extra_upper=extra, extra_lower=extra_lo)
-        return _bracket_result(lower, upper, n_atoms, note)
-    # at least one continuous product in d > 1
-    lows = {}
-    coord = [w1_1d(_coord_marginal(A, j), _coord_marginal(B, j))[0] for j in range(d)]
-    lows["exact W1 of the coordinate marginals"] = max(coord)
-    lows["mean difference"] = mean_lower(A.mean(), B.mean())
+        return _bracket_of_atoms(p, PA, PB, marginal_bounds)
+    return _bracket_of_continuous(p, marginal_bounds)
+
+
+def _bracket_of_atoms(p: _Problem, PA, PB, marginal_bounds) -> W1Result:
+    """:func:`bracket_atoms` on two atomic measures, with the marginal bounds if any."""
+    extra = extra_lo = None
+    if marginal_bounds is not None:
+        l1, root = marginal_bounds
+        extra = (_ROOT_UPPER, root) if root < l1 else (_L1_UPPER, l1)
+        extra_lo = (_L1_LOWER, l1 / math.sqrt(p.d))
+    lower, upper, note = bracket_atoms(PA, PB, p.rng(), n_projections=p.n_projections,
+                                       leaf_size=p.leaf_size, dual_sample=p.dual_sample,
+                                       extra_upper=extra, extra_lower=extra_lo)
+    return _bracket_result(lower, upper, p.n_atoms, note)
+
+
+def _bracket_of_continuous(p: _Problem, marginal_bounds) -> W1Result:
+    """Bracket with at least one continuous product in d > 1: the best of named bounds.
+
+    From below: the largest coordinate-marginal W1 and the difference of means (both
+    1-Lipschitz tests); from above and below, the marginal bounds of two products, or else the
+    triangle inequality through a grid quantization of the product side
+    (:func:`_via_grid`).
+    """
+    coord = [w1_1d(_coord_marginal(p.A, j), _coord_marginal(p.B, j))[0] for j in range(p.d)]
+    lows = {"exact W1 of the coordinate marginals": max(coord),
+            "mean difference": mean_lower(p.A.mean(), p.B.mean())}
     ups = {}
-    if l1 is not None:
-        ups["product-l1 (sum of marginal W1s, |.|_2 <= |.|_1)"] = l1
-        ups["the product of the monotone marginal couplings, (sum_j W2_j^2)^(1/2)"] = root
-        lows["product-l1 / sqrt(d)"] = l1 / math.sqrt(d)
+    if marginal_bounds is not None:
+        l1, root = marginal_bounds
+        ups[_L1_UPPER] = l1
+        ups[_ROOT_UPPER] = root
+        lows[_L1_LOWER] = l1 / math.sqrt(p.d)
     else:
-        # one side is a product with continuous factors, the other non-product atoms:
-        # triangle inequality through a grid quantization G of the product side.
-        prod_side, other = (A, B) if isinstance(A, Prod) else (B, A)
-        if not isinstance(other, Pts):
-            raise InvalidInput("bracket: unsupported pair of measures")  # pragma: no cover
-        G, eG, ns = _quantize_product(prod_side, grid_atoms)
-        if G.n * other.n <= max_exact_pairs:
-            if 8 * G.n * other.n <= max_dense_bytes:
-                r = emd_dense(G.points, G.weights, other.points, other.weights)
-            else:
-                r = emd_lazy(G.points, G.weights, other.points, other.weights)
-            rlo = rup = r
-        else:
-            rlo, rup, _ = bracket_atoms(G, other, rng(), n_projections=n_projections,
-                                        leaf_size=leaf_size, dual_sample=dual_sample)
-        grid = f"a {G.n}-atom grid quantization (grid error <= {eG * unit:.3g})"
-        ups[f"triangle inequality via {grid}"] = rup + eG
-        lows["triangle inequality via the grid"] = rlo - eG
+        lo, up, grid = _via_grid(p)
+        ups[f"triangle inequality via {grid}"] = up
+        lows["triangle inequality via the grid"] = lo
     lo_name = max(lows, key=lows.get)
     up_name = min(ups, key=ups.get)
     lower, upper = max(0.0, lows[lo_name]), ups[up_name]
-    return _bracket_result(min(lower, upper), upper, n_atoms,
+    return _bracket_result(min(lower, upper), upper, p.n_atoms,
                            f"lower bound from {lo_name}, upper bound from {up_name}")
+
+
+def _via_grid(p: _Problem) -> tuple[float, float, str]:
+    """``W1(G, other) ∓ e_G``: ``G`` a grid of the product side, ``e_G ≥ W1(product, G)``.
+
+    One side is a product with continuous factors, the other non-product atoms; ``G`` has at
+    most ``grid_atoms`` atoms (:func:`_quantize_product`), ``W1(G, other)`` is exact while
+    ``N·M ≤ max_exact_pairs`` (dense or lazy by ``max_dense_bytes``) and bracketed beyond.
+    Returns the lower bound, the upper bound and a description of ``G``.
+    """
+    prod_side, other = (p.A, p.B) if isinstance(p.A, Prod) else (p.B, p.A)
+    if not isinstance(other, Pts):
+        raise InvalidInput("bracket: unsupported pair of measures")  # pragma: no cover
+    G, eG, _ = _quantize_product(prod_side, p.grid_atoms)
+    if G.n * other.n <= p.max_exact_pairs:
+        emd = emd_dense if 8 * G.n * other.n <= p.max_dense_bytes else emd_lazy
+        rlo = rup = emd(G.points, G.weights, other.points, other.weights)
+    else:
+        rlo, rup, _ = bracket_atoms(G, other, p.rng(), n_projections=p.n_projections,
+                                    leaf_size=p.leaf_size, dual_sample=p.dual_sample)
+    return rlo - eG, rup + eG, f"a {G.n}-atom grid quantization (grid error <= {eG * p.unit:.3g})"
+
+
+#: The runner of each resolved method (every entry of :data:`METHODS` but "auto").
+_RUNNERS = {
+    "exact": _run_exact,
+    "exact-lazy": _run_exact_lazy,
+    "exact-1d": _run_exact_1d,
+    "product-l1": _run_product_l1,
+    "bracket": _run_bracket,
+}
 
 
 #: Relative widening of every bracket, so that it stays certified despite floating-point
@@ -435,8 +526,7 @@ def sliced_w1(mu, nu, n_projections: int = 256, *, a=None, b=None, seed=None) ->
     """
     n_projections = as_int(n_projections, "n_projections", low=1)
     A, B, unit = normalize_pair(mu, nu, a, b)
-    PA = _as_pts(A, _MAX_MATERIALIZE, "mu")
-    PB = _as_pts(B, _MAX_MATERIALIZE, "nu")
+    PA, PB = _as_pts(A, _MAX_MATERIALIZE), _as_pts(B, _MAX_MATERIALIZE)
     if PA is None or PB is None:
         raise InvalidInput("sliced_w1 needs atomic measures (quantize continuous ones first)")
     rng = as_generator(seed)

@@ -346,28 +346,61 @@ def theorem_bound(solution, reduced, *, eps: float | None = None) -> TheoremBoun
     >>> tb.term_jl                                             # D = 0: exact projection
     array([0., 0., 0.])
     """
-    from ..projection import trajectory_distortion
-    from ..dynamics import SelfPropulsion
-
     P = reduced.projection
     if not np.array_equal(solution.t, reduced.t):
         raise InvalidInput("solution and reduced must share their save times")
     eps = solution.eps if eps is None else as_float(eps, "eps", low=0.0)
     norm_M = P.norm()
-    T = len(solution.t)
-    scene = solution.scene
-    w = solution.weights
-    c0 = w @ solution.x[0]
-    X = solution.x - c0[None, None, :] if scene.translation_invariant else solution.x
-    Y = reduced.y - P.apply(c0)[None, None, :] if scene.translation_invariant else reduced.y
-    V, W = solution.v, reduced.w
-    S = float(np.sum(scene.coefficients(len(w))))
+    measured = _measure_a_priori(solution, reduced)
+    rates = _effect_rates(solution.scene, len(solution.weights), measured)
+    return _assemble(np.asarray(solution.t, float), float(eps), norm_M, measured, rates)
+
+
+@dataclass(frozen=True)
+class _APriori:
+    """A-priori quantities of Theorems 3.1/4.3 measured at the saved times, as running maxima.
+
+    Each field is a ``(T,)`` array; see :class:`TheoremBound` for their meaning.
+    """
+
+    eps_jl: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    speed: np.ndarray
+    diam_x: np.ndarray
+    diam_v: np.ndarray
+
+
+def _distance_sources(scene) -> set:
+    """The distances the scene's effects depend on: ``"x"``, ``"v"`` (pairwise), ``"speed"``."""
+    from ..dynamics import SelfPropulsion
+
     sources = set()
     for e in scene.effects:
         if getattr(e, "pairwise", False):
             sources.add(e.source)
         if isinstance(e, SelfPropulsion):
             sources.add("speed")
+    return sources
+
+
+def _measure_a_priori(solution, reduced) -> _APriori:
+    """``α`` (3.3), ``ε_JL`` (3.4), ``β`` (3.6), ``β_v`` and the support diameters.
+
+    ``α`` and ``ε_JL`` are taken on the distances the effects depend on
+    (:func:`_distance_sources`); positions relative to the initial centroid when the scene is
+    translation invariant. Each quantity is the running maximum over the saved times up to t.
+    """
+    from ..projection import trajectory_distortion
+
+    P = reduced.projection
+    T = len(solution.t)
+    scene = solution.scene
+    c0 = solution.weights @ solution.x[0]
+    X = solution.x - c0[None, None, :] if scene.translation_invariant else solution.x
+    Y = reduced.y - P.apply(c0)[None, None, :] if scene.translation_invariant else reduced.y
+    V, W = solution.v, reduced.w
+    sources = _distance_sources(scene)
     n = X.shape[1]
     alpha_t = np.zeros(T)
     eps_t = np.zeros(T)
@@ -385,38 +418,65 @@ def theorem_bound(solution, reduced, *, eps: float | None = None) -> TheoremBoun
     dx_t = np.array([max(max_pairwise_distance(X[i]), max_pairwise_distance(Y[i])) for i in range(T)])
     dv_t = np.array([max(max_pairwise_distance(V[i]), max_pairwise_distance(W[i])) for i in range(T)])
     run = np.maximum.accumulate
-    alpha, eps_jl, beta, speed, diam_x, diam_v = (run(a) for a in (alpha_t, eps_t, beta_t, speed_t,
-                                                                   dx_t, dv_t))
+    return _APriori(eps_jl=run(eps_t), alpha=run(alpha_t), beta=run(beta_t), speed=run(speed_t),
+                    diam_x=run(dx_t), diam_v=run(dv_t))
+
+
+@dataclass(frozen=True)
+class _Rates:
+    """The scene's constants (1.2)–(1.4) and stability rate Λ at each saved time."""
+
+    L: float
+    Lp: np.ndarray
+    Lpp: np.ndarray
+    Lambda: np.ndarray
+    effects: tuple
+    covered: bool
+
+
+def _effect_rates(scene, n_agents: int, measured: _APriori) -> _Rates:
+    """Sum of the per-effect constants (:func:`effect_constants`) at each time's running maxima.
+
+    ``L′ = max(1, Σ)`` (the x-rows contribute 1), ``Λ = 1 + Σ (Λ_z + Λ_μ)`` (``ẋ = v`` adds 1);
+    ``effects`` are the constants at the final time, ``covered`` is False when one of them is
+    not finite (noise, unknown effects).
+    """
+    S = float(np.sum(scene.coefficients(n_agents)))
+    T = len(measured.speed)
     Lp = np.empty(T)
     Lpp = np.empty(T)
     Lam = np.empty(T)
     L = 0.0
     consts = ()
-    covered = True
     for i in range(T):
-        consts = tuple(effect_constants(e, coef_sum=S, speed=float(speed[i]), diam_x=float(diam_x[i]),
-                                        diam_v=float(diam_v[i])) for e in scene.effects)
+        consts = tuple(effect_constants(e, coef_sum=S, speed=float(measured.speed[i]),
+                                        diam_x=float(measured.diam_x[i]),
+                                        diam_v=float(measured.diam_v[i])) for e in scene.effects)
         L = float(sum(c.L for c in consts))
         Lp[i] = max(1.0, float(sum(c.Lp for c in consts)))
         Lpp[i] = float(sum(c.Lpp for c in consts))
         Lam[i] = 1.0 + float(sum(c.lip_state + c.lip_measure for c in consts))
-    if any(not np.isfinite(c.Lp) for c in consts):
-        covered = False
-    t = np.asarray(solution.t, float) - float(solution.t[0])
-    D_eps = np.atleast_1d(d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M))
-    C = np.atleast_1d(stability_constant(t, Lam))
+    covered = not any(not np.isfinite(c.Lp) for c in consts)
+    return _Rates(L=L, Lp=Lp, Lpp=Lpp, Lambda=Lam, effects=consts, covered=covered)
+
+
+def _assemble(times: np.ndarray, eps: float, norm_M: float, m: _APriori, r: _Rates) -> TheoremBound:
+    """``2 C(t) ‖M‖ ε + √2 D(t) ε_JL`` (the proof of Theorem 4.3) and the statement's form."""
+    t = times - float(times[0])
+    D_eps = np.atleast_1d(d_estimate(t, m.eps_jl, m.alpha, m.beta, r.L, r.Lp, r.Lpp, norm_M))
+    C = np.atleast_1d(stability_constant(t, r.Lambda))
     with np.errstate(over="ignore", invalid="ignore"):
         term_quant = 2.0 * C * norm_M * eps
         term_jl = math.sqrt(2.0) * D_eps
         bound = term_quant + term_jl
-        bound_stated = (2.0 * C * norm_M + math.sqrt(2.0) * D_eps / np.where(eps_jl > 0, eps_jl, 1.0)) \
-            * norm_M * np.maximum(eps, eps_jl)
+        jl_part = math.sqrt(2.0) * D_eps / np.where(m.eps_jl > 0, m.eps_jl, 1.0)   # √2 D(t)
+        bound_stated = (2.0 * C * norm_M + jl_part) * norm_M * np.maximum(eps, m.eps_jl)
     note = ("bound = 2 C(t) ||M|| eps + sqrt(2) D(t) eps_JL (proof of Theorem 4.3); constants "
             "measured at saved times as running maxima")
-    if not covered:
+    if not r.covered:
         note += "; some effect is outside Theorems 3.1/4.3 (noise or unknown): bound is nan/inf"
-    return TheoremBound(t=np.asarray(solution.t, float), eps=float(eps), norm_M=norm_M,
-                        eps_jl=eps_jl, alpha=alpha, beta=beta, speed=speed, diam_x=diam_x,
-                        diam_v=diam_v, L=L, Lp=Lp, Lpp=Lpp, Lambda=Lam, C=C, D_eps=D_eps,
+    return TheoremBound(t=times, eps=eps, norm_M=norm_M, eps_jl=m.eps_jl, alpha=m.alpha,
+                        beta=m.beta, speed=m.speed, diam_x=m.diam_x, diam_v=m.diam_v, L=r.L,
+                        Lp=r.Lp, Lpp=r.Lpp, Lambda=r.Lambda, C=C, D_eps=D_eps,
                         term_quant=term_quant, term_jl=term_jl, bound=bound,
-                        bound_stated=bound_stated, effects=consts, covered=covered, note=note)
+                        bound_stated=bound_stated, effects=r.effects, covered=r.covered, note=note)
