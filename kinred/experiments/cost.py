@@ -276,7 +276,7 @@ def _study_projection(cfg: CostConfig, bar) -> dict:
     from .._rng import member_seed
     from ..dynamics import Alignment, CuckerSmale, Scene
     from ..integrate import SaveAt, simulate
-    from ..observables import flocking_verdict
+    from ..observables import flocking_verdict, gamma_floor
     from ..projection import jl_matrix
 
     rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(1,)))
@@ -347,7 +347,8 @@ def _study_projection(cfg: CostConfig, bar) -> dict:
                              steps=cfg.proj_steps, dt=cfg.proj_dt, T=T, method="euler",
                              error="spread-relative trajectory error of positions, "
                                    "(sum_i |y_i - M x_i|^2 / sum_i |M x_i - M xbar|^2)^(1/2)"),
-                full=dict(time_s=t_full, gamma_T=g_full, verdict=verdict_full),
+                full=dict(time_s=t_full, gamma_T=g_full, verdict=verdict_full,
+                          gamma_floor=gamma_floor(v0, cfg.proj_steps)),
                 full_mixed=full_mixed, runs=rows, summary=summary)
 
 
@@ -576,6 +577,8 @@ def machine_info() -> dict:
 
 def headline(studies: dict, cfg: CostConfig) -> dict:
     """Quotable sentences (and their numbers) from the studies that were run."""
+    from ..observables import above_floor
+
     out: dict = {}
     p = studies.get("projection")
     if p:
@@ -599,8 +602,9 @@ def headline(studies: dict, cfg: CostConfig) -> dict:
                       f"{p['setting']['d']} simulation {fm['speedup']:.2g}x faster at "
                       f"{fm['error_max']:.1e} relative trajectory error (max over time); "
                       + (f"{fm['gamma_rel_diff']:.1e} relative change of Gamma(T)"
-                         if p["full"]["gamma_T"] > 1e-28 else
-                         "Gamma(T) at float64's round-off floor (< 1e-28) in both")))
+                         if above_floor(p["full"]["gamma_T"], p["full"]["gamma_floor"]) else
+                         f"Gamma(T) near float64's round-off floor "
+                         f"({p['full']['gamma_floor']:.1g}) in both")))
     g = studies.get("integrators")
     if g:
         def t_of(m, e):
