@@ -61,7 +61,8 @@ from .dynamics import (
     set_num_threads,
 )
 from .integrate import METHODS, SaveAt, Trajectory, simulate
-from .observables import centre, flocking_verdict, gamma, lambda_, mean_velocity, relative_error
+from .observables import (above_floor, centre, flocking_verdict, gamma, gamma_floor, lambda_,
+                          mean_velocity, relative_error)
 from .ensemble import EnsembleResult, grid, run_ensemble
 from .io import ResultFolder
 from . import kinetic
@@ -86,6 +87,7 @@ __all__ = [
     "set_num_threads",
     "simulate", "SaveAt", "Trajectory", "METHODS",
     "gamma", "lambda_", "centre", "mean_velocity", "flocking_verdict", "relative_error",
+    "gamma_floor", "above_floor",
     # ensembles and results
     "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
     # kinetic solutions: kinred.kinetic.solve / reduce / compare / theorem_bound

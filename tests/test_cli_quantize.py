@@ -107,10 +107,10 @@ def test_missing_file(capsys):
 def test_python_m_kinred_quantize(tmp_path):
     f = _write(tmp_path, UNIFORM3)
     r = subprocess.run([sys.executable, "-m", "kinred", "quantize", f, "--eps", "0.1"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert r.returncode == 0, r.stderr
     assert "budget" in r.stdout and "N_j" in r.stdout
     bad = _write(tmp_path, '[[coordinate]]\ndist = "nosuchlaw"\n', "bad.toml")
     r = subprocess.run([sys.executable, "-m", "kinred", "quantize", bad, "--eps", "0.1"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+                       capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "unknown distribution" in r.stderr

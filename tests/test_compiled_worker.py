@@ -197,5 +197,5 @@ def test_two_thread_steps_are_bitwise_reproducible():
         print("ok")
     """)
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300)
+                         timeout=600)
     assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr[-2000:]

@@ -41,6 +41,6 @@ def test_demo_defaults_are_high_dimensional_and_budgeted():
 
 def test_python_m_kinred_demo_subprocess(tmp_path):
     p = subprocess.run([sys.executable, "-m", "kinred", "demo", "--smoke", "--out",
-                        str(tmp_path / "d")], capture_output=True, text=True, timeout=300)
+                        str(tmp_path / "d")], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip().endswith("report.html")

@@ -50,7 +50,7 @@ def test_example_smoke(script, tmp_path):
     assert path.exists(), f"{path} is missing"
     env = dict(os.environ, PYTHONHASHSEED="0", MPLBACKEND="Agg")
     proc = subprocess.run([sys.executable, str(path), "--smoke"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"{script} failed:\n{proc.stdout}\n{proc.stderr}"
     for pattern in EXPECTED[script]:
         assert re.search(pattern, proc.stdout, re.MULTILINE), \

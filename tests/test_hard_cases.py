@@ -14,7 +14,7 @@ from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse,
 from kinred.errors import InvalidInput, NotConverged, SimulationDiverged
 from kinred.integrate import BS32, DOPRI5, EULER, HEUN, RK4, SaveAt, simulate
 from kinred.integrate._guard import energy_budget, real_stability
-from kinred.observables import gamma
+from kinred.observables import above_floor, gamma, gamma_floor
 
 
 def _data(N, d, seed=0):
@@ -90,7 +90,7 @@ def test_gamma_decays_to_1e_30_and_matches_twin():
     twin = simulate(Scene([Alignment(CuckerSmale(0.8, 1.5))], "sum", engine="numpy"), x0, v0,
                     (0, 30), 0.02, **kw)
     gf, gt = fast.observables["gamma"], twin.observables["gamma"]
-    assert gf[-1] < 1e-28
+    assert not above_floor(gf[-1], gamma_floor(v0, fast.n_steps), factor=1.0)   # at the floor
     # Gamma recomputed from the saved states agrees with the recorded one
     assert gamma(fast.v[-1]) == pytest.approx(gf[-1], rel=1e-12)
     # the fast engine and its twin agree while Gamma decays over 28 decades

@@ -150,7 +150,7 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
     out = tmp_path / "out"
     env = dict(os.environ, **{kinetic_run.STAGE_HOOK_ENV: "2:kill"})
     p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(out)]), env=env,
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=600)
     assert p.returncode == -signal.SIGKILL, p.stderr
     done = sorted(x.name for x in (out / "stages").iterdir())
     assert done == ["config.json", "reference.npz", "solve.npz"]
@@ -178,6 +178,6 @@ def test_python_m_kinred_run_subprocess(tmp_path):
     scene = tmp_path / "s.toml"
     scene.write_text(BASE)
     p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(tmp_path / "o")]),
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     assert "report:" in p.stdout and p.stderr == ""    # no progress bar when not a TTY

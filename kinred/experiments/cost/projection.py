@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._validate import as_choice, as_int
+from ...observables import above_floor
 from ...projection import KINDS
 from ._base import Study, StudyConfig, clock, draw_front
 
@@ -175,7 +176,7 @@ class ProjectionStudy(Study):
         return 1 + cfg.reps * len(cfg.ks) * len(cfg.kinds)
 
     def run(self, cfg: ProjectionConfig, *, seed: int, bar) -> dict:
-        from ...observables import flocking_verdict
+        from ...observables import flocking_verdict, gamma_floor
 
         s = _Setup(cfg, self.rng(seed))
         _warm_up(s)
@@ -189,8 +190,9 @@ class ProjectionStudy(Study):
                        steps=cfg.steps, dt=cfg.dt, T=s.T, method="euler",
                        error="spread-relative trajectory error of positions, "
                              "(sum_i |y_i - M x_i|^2 / sum_i |M x_i - M xbar|^2)^(1/2)")
-        return dict(setting=setting, full=dict(time_s=t_full, gamma_T=g_full, verdict=verdict_full),
-                    full_mixed=full_mixed, runs=rows, summary=_summary(cfg, rows, t_full))
+        full_out = dict(time_s=t_full, gamma_T=g_full, verdict=verdict_full,
+                        gamma_floor=gamma_floor(s.v0, cfg.steps))
+        return dict(setting=setting, full=full_out, full_mixed=full_mixed, runs=rows, summary=_summary(cfg, rows, t_full))
 
     def table(self, result: dict):
         from ...report import Table
@@ -234,8 +236,9 @@ class ProjectionStudy(Study):
                       f"{p['setting']['d']} simulation {fm['speedup']:.2g}x faster at "
                       f"{fm['error_max']:.1e} relative trajectory error (max over time); "
                       + (f"{fm['gamma_rel_diff']:.1e} relative change of Gamma(T)"
-                         if p["full"]["gamma_T"] > 1e-28 else
-                         "Gamma(T) at float64's round-off floor (< 1e-28) in both")))
+                         if above_floor(p["full"]["gamma_T"], p["full"]["gamma_floor"]) else
+                         f"Gamma(T) near float64's round-off floor "
+                         f"({p['full']['gamma_floor']:.1g}) in both")))
         return out
 
 
