@@ -228,8 +228,17 @@ def test_invalid_compiled_forms_are_refused_when_the_scene_is_built(form):
         def compiled_form(self):
             return form
 
-    with pytest.raises(InvalidInput, match=r"compiled_form\(\) returned .*kind in \('cs_halfint', 'cs_pow'\)"):
+    match = r"compiled_form\(\) returned .*kind in \('cs_halfint', 'cs_pow'\)"
+    with pytest.raises(InvalidInput, match=match):
         Scene([PairwiseEffect(Bad(1.0, 1.0))])
+
+
+def test_a_compiled_form_attribute_that_is_not_a_method_is_refused():
+    class Attr(HookedPower):
+        compiled_form = ("cs_pow", 1.0, 1.0)
+
+    with pytest.raises(InvalidInput, match="compiled_form must be a method"):
+        Scene([PairwiseEffect(Attr(1.0, 1.0))])
 
 
 def test_pair_terms_list_only_what_the_effects_call_for():

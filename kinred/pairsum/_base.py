@@ -54,10 +54,14 @@ def compiled_form(kernel) -> tuple[str, float, float] | None:
     fn = getattr(kernel, "compiled_form", None)
     if fn is None:
         return None
+    if not callable(fn):
+        raise InvalidInput(f"{kernel!r}.compiled_form must be a method returning None or "
+                           f"(kind, a, b), got {fn!r}")
     form = fn()
     if form is None:
         return None
-    ok = isinstance(form, tuple) and len(form) == 3 and form[0] in COMPILED_KINDS
+    ok = (isinstance(form, tuple) and len(form) == 3 and isinstance(form[0], str)
+          and form[0] in COMPILED_KINDS)
     if ok:
         try:
             a, b = float(form[1]), float(form[2])
