@@ -10,10 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene, _kernels
+from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
 from kinred.dynamics import _threads
-from kinred.dynamics import scene as scene_mod
 from kinred.dynamics._threads import num_threads
+from kinred.pairsum import Dense, Numpy, _kernels
+
+
+def _pair_sums(scene, x, v, pairsum):
+    """``{target: contribution}`` of ``scene``'s pair terms by the backend ``pairsum``."""
+    return pairsum.evaluate(pairsum.plan(scene, *x.shape), x, v, None)
 
 
 def test_compiled_worker_links_whenever_numpy_ships_openblas():
@@ -100,7 +105,7 @@ def _scenes():
 @pytest.mark.parametrize("precision", ["double", "mixed"])
 @pytest.mark.parametrize("dim", [1, 3, 4, 10, 60])
 @pytest.mark.parametrize("case", list(_scenes()), ids=[c[0] for c in _scenes()])
-def test_compiled_worker_equals_python_strip_loop(case, dim, precision, monkeypatch):
+def test_compiled_worker_equals_python_strip_loop(case, dim, precision):
     name, effects, opts = case
     n = 150
     rng = np.random.default_rng(dim)
@@ -109,13 +114,11 @@ def test_compiled_worker_equals_python_strip_loop(case, dim, precision, monkeypa
     x[7] = x[3]                                   # coincident agents
     w = rng.dirichlet(np.ones(n)) if opts.get("weights") else None
     sc = Scene(effects, normalize="sum", weights=w, precision=precision, block=32)
-    ref = sc._pairwise_numpy(x, v)
+    ref = _pair_sums(sc, x, v, Numpy())
     for threads in (1, 2):
         with num_threads(threads):
-            monkeypatch.setattr(scene_mod, "_USE_COMPILED", True)
-            got = sc._pairwise(x, v)
-            monkeypatch.setattr(scene_mod, "_USE_COMPILED", False)
-            loop = sc._pairwise(x, v)
+            got = _pair_sums(sc, x, v, Dense(block=32, precision=precision))
+            loop = _pair_sums(sc, x, v, Dense(block=32, precision=precision, compiled=False))
         for key in ref:
             scale = np.max(np.abs(ref[key]))
             tol = 1e-13 if precision == "double" else 2e-5
@@ -126,14 +129,12 @@ def test_compiled_worker_equals_python_strip_loop(case, dim, precision, monkeypa
                                                              else 1e-6) * scale
 
 
-def test_compiled_worker_is_bitwise_the_python_loop_for_half_integer_beta(monkeypatch):
+def test_compiled_worker_is_bitwise_the_python_loop_for_half_integer_beta():
     rng = np.random.default_rng(5)
     x, v = rng.uniform(0, 1, (300, 12)), rng.uniform(-1, 1, (300, 12))
-    sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], normalize="sum")
-    monkeypatch.setattr(scene_mod, "_USE_COMPILED", True)
-    a = sc.rhs(x, v)[1]
-    monkeypatch.setattr(scene_mod, "_USE_COMPILED", False)
-    b = sc.rhs(x, v)[1]
+    effects = [Alignment(CuckerSmale(0.8, 1.5))]
+    a = Scene(effects, normalize="sum", pairsum=Dense()).rhs(x, v)[1]
+    b = Scene(effects, normalize="sum", pairsum=Dense(compiled=False)).rhs(x, v)[1]
     assert np.array_equal(a, b)
 
 
@@ -149,7 +150,7 @@ def test_kernels_without_compiled_form_use_the_python_loop(monkeypatch):
     sc = Scene([Alignment(CuckerSmale(0.8, 1.62)), AttractionRepulsion(Morse(soft=0.1))])
     got = sc.rhs(x, v)[1]
     assert not calls                        # Morse has no compiled form: Python strip loop
-    ref = sc._pairwise_numpy(x, v)["v"]
+    ref = _pair_sums(sc, x, v, Numpy())["v"]
     assert np.max(np.abs(got - ref)) <= 1e-12 * np.max(np.abs(ref))
 
 
@@ -185,13 +186,13 @@ def test_two_thread_steps_are_bitwise_reproducible():
     code = textwrap.dedent("""
         import numpy as np
         from kinred.dynamics import Alignment, CuckerSmale, Scene, set_num_threads
-        from kinred.dynamics import scene as scene_mod
+        from kinred.pairsum import Dense
         set_num_threads(2)
         rng = np.random.default_rng(0)
         x, v = rng.uniform(0, 1, (1000, 200)), rng.uniform(-1, 1, (1000, 200))
-        sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], normalize="sum")
         for compiled in (True, False):
-            scene_mod._USE_COMPILED = compiled
+            sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], normalize="sum",
+                       pairsum=Dense(compiled=compiled))
             outs = [sc.rhs(x, v)[1].copy() for _ in range(25)]
             assert all(np.array_equal(o, outs[0]) for o in outs), compiled
         print("ok")

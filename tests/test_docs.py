@@ -12,8 +12,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
-API_MODULES = ["measures", "quantize", "distance", "projection", "dynamics", "integrate",
-               "observables", "recovery", "ensemble", "kinetic", "io", "report", "errors"]
+API_MODULES = ["measures", "quantize", "distance", "projection", "dynamics", "pairsum",
+               "integrate", "observables", "recovery", "ensemble", "kinetic", "io", "report",
+               "errors"]
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,12 @@ import pytest
 
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
                              Effect, Field, Morse, Noise, PairwiseEffect, Quadratic, Scene,
-                             SelfPropulsion, _kernels, project_state, set_num_threads,
+                             SelfPropulsion, project_state, set_num_threads,
                              get_num_threads)
 from kinred.errors import InvalidInput, NotProjectable
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import centre, mean_velocity
+from kinred.pairsum import _kernels
 
 
 def _data(N=60, d=5, seed=0):
@@ -201,7 +202,7 @@ def test_scratch_reuse_never_aliases_results(monkeypatch):
     """The engine reuses its scratch buffers between calls: a drift returned earlier must not
     change when the scene is evaluated again (on another state), and large workspaces are not
     kept at all."""
-    from kinred.dynamics import Alignment, CuckerSmale, Scene, scene as scene_mod
+    from kinred.pairsum import dense as dense_mod
 
     rng = np.random.default_rng(3)
     x1, v1, x2, v2 = (rng.normal(size=(60, 7)) for _ in range(4))
@@ -215,7 +216,7 @@ def test_scratch_reuse_never_aliases_results(monkeypatch):
     twin = Scene([Alignment(CuckerSmale(G=1.0, beta=0.8))], engine="numpy").rhs(x2, v2)[1]
     np.testing.assert_allclose(dv2, twin, rtol=1e-12, atol=1e-12)
 
-    scene_mod._SCRATCH.cache = {}
-    monkeypatch.setattr(scene_mod, "_SCRATCH_MAX_BYTES", 1024)
+    dense_mod._SCRATCH.cache = {}
+    monkeypatch.setattr(dense_mod, "_SCRATCH_MAX_BYTES", 1024)
     sc.rhs(x1, v1)
-    assert scene_mod._SCRATCH.cache == {}               # too large to keep
+    assert dense_mod._SCRATCH.cache == {}               # too large to keep

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from kinred.dynamics import CuckerSmale, Morse, Quadratic, _kernels
+from kinred.dynamics import CuckerSmale, Morse, Quadratic
+from kinred.pairsum import _kernels
 
 
 @pytest.mark.parametrize("k", [1, 2, 10, 57, 200])

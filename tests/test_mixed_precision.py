@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene,
-                             SelfPropulsion, _kernels, _threads)
+                             SelfPropulsion, _threads)
 from kinred.dynamics._threads import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import above_floor, gamma_floor, mean_velocity
+from kinred.pairsum import _kernels
 
 
 def _data(N, d, seed=0):

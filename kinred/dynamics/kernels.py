@@ -8,12 +8,13 @@ distances). Built-in kernels also provide
 * ``sup_norm()`` and ``lipschitz()`` – ``‖φ‖∞`` and ``‖φ′‖∞`` on ``[0, ∞)``, the constants that
   enter the bounds (1.2)–(1.4) of the paper (labels ``eq:condf1``–``eq:condf3``).
 
-Custom kernels without ``value_sq`` still work: the engine evaluates ``kernel(np.sqrt(q))``.
+* ``compiled_form()`` – the kernel hook for compiled code: None, or ``(kind, a, b)`` naming
+  a closed form of :data:`kinred.pairsum.COMPILED_KINDS` that equals the kernel (Cucker–Smale:
+  ``("cs_halfint", G, 2β)`` or ``("cs_pow", G, β)``). The dense backend evaluates such
+  kernels inside its compiled strip worker (no Python call per strip, no GIL); a scene whose
+  pairwise kernels all have one uses it, any other scene a Python strip loop (same operations).
 
-A kernel with a ``_compiled`` attribute ``(kind, a, b)`` (kinds in ``_kernels``: Cucker–Smale
-half-integer and general β) is evaluated inside the engine's compiled strip worker, which
-runs a thread's whole share of the pairwise stage without the GIL; a scene whose pairwise
-kernels all have one uses it, any other scene the Python strip loop (same operations).
+Custom kernels without ``value_sq`` still work: the backends evaluate ``kernel(np.sqrt(q))``.
 
 Sign conventions (eq. (3.14), label ``DOrsogna2``, and eq. (4.3), label ``eq:dyn5``): a
 potential ``U`` acts on agent ``i`` by ``−∇_{xᵢ} U(‖xᵢ − xⱼ‖) = u(s)(xⱼ − xᵢ)`` with
@@ -28,7 +29,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .._validate import as_float
-from . import _kernels
+from ..pairsum import _kernels
 
 __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
 
@@ -37,8 +38,8 @@ __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
 class Kernel(Protocol):
     """Protocol of a pairwise kernel ``φ: [0, ∞) → ℝ``.
 
-    Only ``__call__`` is required; ``value_sq``, ``sup_norm`` and ``lipschitz`` are optional
-    (the engine falls back to ``φ(√q)``).
+    Only ``__call__`` is required; ``value_sq``, ``compiled_form``, ``sup_norm`` and
+    ``lipschitz`` are optional (the backends fall back to ``φ(√q)``; see the module notes).
     """
 
     def __call__(self, s): ...
@@ -50,10 +51,11 @@ class CuckerSmale:
     .. math:: g(s) = \frac{G}{(1 + s^2)^{\beta}} = G\,\exp\bigl(-\beta\,\operatorname{log1p}(s^2)\bigr)
 
     evaluated in the exp–log1p form (``__call__``, the reference), which never overflows
-    (large ``s``, ``β`` up to any size underflow gracefully to 0). The engine's path
+    (large ``s``, ``β`` up to any size underflow gracefully to 0). The numpy path
     (:meth:`value_sq`) uses numpy's SIMD ufuncs on cache-sized blocks (in float32 blocks
     the form ``G·2^(−β·log₂(1 + s²))``), and for half-integer ``β ≤ 5/2`` a numba kernel with
-    one square root and one division per entry (0.87 ns per entry).
+    one square root and one division per entry; :meth:`compiled_form` lets the dense
+    backend's compiled worker evaluate it without Python calls.
 
     Parameters
     ----------
@@ -79,12 +81,18 @@ class CuckerSmale:
         n2 = 2.0 * self.beta
         self._n2 = int(n2) if (n2 == int(n2) and n2 <= 5) else None
 
-    @property
-    def _compiled(self):
-        """``(kind, a, b)`` for the engine's compiled strip worker (no Python per strip)."""
+    def compiled_form(self) -> tuple[str, float, float]:
+        """The closed form for compiled backends (see :data:`kinred.pairsum.COMPILED_KINDS`):
+        ``("cs_halfint", G, 2β)`` for half-integer ``β ≤ 5/2``, else ``("cs_pow", G, β)``.
+
+        Examples
+        --------
+        >>> CuckerSmale(G=0.8, beta=1.62).compiled_form()
+        ('cs_pow', 0.8, 1.62)
+        """
         if self._n2 is not None:
-            return (_kernels.KIND_CS_HALFINT, self.G, float(self._n2))
-        return (_kernels.KIND_CS_POW, self.G, self.beta)
+            return ("cs_halfint", self.G, float(self._n2))
+        return ("cs_pow", self.G, self.beta)
 
     def __call__(self, s):
         s = np.asarray(s, dtype=float)
@@ -95,10 +103,9 @@ class CuckerSmale:
 
         General β, with numpy's SIMD ufuncs in place: float64 blocks use
         ``G·exp(−β·log1p(q))`` (the reference form); the float32 blocks of
-        ``precision="mixed"`` use ``G·2^(−β·log₂(1 + q))``, 1.4× faster there (0.9–1.0 vs
-        1.2–1.4 ns per entry, measured; in float64 both chains cost 2.5–3 ns and the
-        reference form is kept). Rounding ``1 + q`` first costs a relative error of only
-        ``β·u`` in ``g``; measured 7e-7 relative in float32. Never overflows: the exponent is ≤ 0.
+        ``precision="mixed"`` use ``G·2^(−β·log₂(1 + q))``, which is faster there
+        (docs/performance.md). Rounding ``1 + q`` first costs a relative error of only
+        ``β·u`` in ``g``. Never overflows: the exponent is ≤ 0.
         """
         if self._n2 is not None:
             return _kernels.cs_halfint(q, self.G, self._n2, out)

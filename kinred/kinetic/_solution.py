@@ -151,8 +151,7 @@ def weighted_scene(scene, weights):
     from ..dynamics import Scene
 
     scene = _check_scene(scene)
-    return Scene(scene.effects, normalize=scene.normalize, weights=weights, block=scene.block,
-                 engine=scene.engine, precision=scene.precision)
+    return Scene(scene.effects, normalize=scene.normalize, weights=weights, pairsum=scene.pairsum)
 
 
 def _save_spec(t_span, dt, method, times, save_every):

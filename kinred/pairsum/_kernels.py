@@ -1,9 +1,14 @@
-"""Private numba kernels of the pairwise engine, each with a plain-numpy twin.
+"""Private numba kernels of the pair-sum backends, each with a plain-numpy twin.
 
-Only this module imports numba. Every kernel is compiled with ``cache=True`` and
-``nogil=True`` (so that Python threads over row strips run in parallel) and uses fastmath
-flags that only allow re-association and contraction of sums (``{"reassoc", "contract"}``):
-NaN and Inf propagate exactly as in IEEE arithmetic, so divergence stays detectable.
+Only this module (and the other private ``_kernels.py`` modules) imports numba. Every kernel
+is compiled with ``cache=True`` and ``nogil=True`` (so that Python threads over row strips
+run in parallel) and uses fastmath flags that only allow re-association and contraction of
+sums (``{"reassoc", "contract"}``): NaN and Inf propagate exactly as in IEEE arithmetic, so
+divergence stays detectable.
+
+All kernels live in this one file on purpose: the compiled strip worker inlines the kernel
+rows (``_cs_row``, :func:`pow_row64`), and numba's on-disk cache of a function is
+invalidated only when *its own* source file changes.
 
 Kernels
 -------
@@ -14,50 +19,23 @@ Kernels
     pass that recomputes them by differences. Twin: :func:`sqdist_numpy` (pure differences).
 ``sqdist_diff(YT, i0, i1, j0, out)``
     Squared distances by differences from transposed coordinates ``YT (k, N)``, vectorized
-    over columns (the engine's path for ``k ≤ 3``). Twin: :func:`sqdist_numpy`.
+    over columns (the dense backend's path for ``k ≤ 3``). Twin: :func:`sqdist_numpy`.
 ``pair_strips(strips, ...)``
     The pairwise stage of one engine thread in one compiled call (Gram block by
     ``cblas_?gemm`` of numpy's OpenBLAS, fix-up, kernel, both pair-sum products per strip).
-    Twin: the Python strip loop of ``Scene._pairwise`` (same operations, same order).
+    Twin: the Python strip loop of :class:`kinred.pairsum.Dense` (same operations, same
+    order).
 ``cs_pow(Q, G, beta, scr)`` (rows: ``pow_row64``, ``pow_row32``)
-    Cucker–Smale ``G (1 + q)^(−β)`` for general β without libm calls. Twin: :func:`cs_numpy`.
+    Cucker–Smale ``G (1 + q)^(−β)`` for general β without libm calls (so that the compiled
+    worker needs no Python call). Twin: :func:`cs_numpy`.
 ``cs_halfint(Q, G, n2, out)``
-    Cucker–Smale kernel ``G (1 + q)^(−n2/2)`` for integer ``n2`` with sqrt and division only
-    (``out`` may be ``Q``: a separate in-place kernel, since LLVM vectorizes a loop over two
-    arrays only after a runtime no-overlap check, and exact aliasing fails it: measured 3.7
-    vs 0.87 ns per entry). Twin: :func:`cs_numpy` (``G·exp(−β·log1p(q))``).
+    Cucker–Smale kernel ``G (1 + q)^(−n2/2)`` for integer ``n2`` with sqrt and division
+    only. Twin: :func:`cs_numpy` (``G·exp(−β·log1p(q))``).
 
-Performance notes (Xeon with AVX-512, then AMD EPYC Zen 4; no SVML in numba): numba's
-scalar ``exp``/``log1p`` cost 11–20 ns per entry, numpy's SIMD ufuncs ≈ 1 ns each (the chain
-``G·exp(−β·log1p(q))`` ≈ 2.2–3 ns per entry; ``G·exp2(−β·log2(1+q))`` costs the same in
-float64 and 1.4× less in float32, where the engine uses it), square roots and
-divisions ≈ 1 ns even vectorized; kernels therefore evaluate transcendentals with numpy ufuncs on the engine's
-cache-sized blocks and numba does only cheap arithmetic (``cs_halfint`` for ``2β ≤ 5``:
-0.87 ns per entry). A branch-free polynomial ``exp(−β log(1+q))`` in numba (bit casts,
-degree-11 ``atanh`` series and degree-13 Taylor, relative error ≤ 3e-16·(1 + β log(1+q)))
-vectorizes to 512-bit code on Zen 4 but is compute-bound at 2.6–3.5 ns per entry – no faster
-than the ufunc chain (measured on both machines). It is now used (:func:`pow_row64`,
-:func:`pow_row32`) for another reason: inside the compiled strip worker
-(:func:`pair_strips`) it needs no Python call, and the GIL hand-offs it saves were the
-k = 10 step's real cost with two threads (see the section "compiled strip worker" below).
-Table-driven variants (64-entry ``2^(i/64)`` table and/or a 128-entry log table with
-degree-5/7 polynomials, no division) measured only 3.2 vs 3.5 ns: gathers cost what the
-saved multiply-adds did; not kept.
-
-A fused compiled loop for small dimensions (distances by differences, kernel and both
-orientations of the pair sum per row, no BLAS and no Python per strip) was measured at
-k = 10 and not kept: distances 1.3 ns and the two sums 2.3 ns per pair, i.e. no faster than
-the BLAS products it would replace. The compiled strip worker keeps the BLAS products and
-calls them from numba instead.
-
-A dense variant of the d = 200 step (one threaded ``syrk`` for the whole Gram matrix, the
-kernel on N × N, one threaded ``gemm``) was measured against the strips at N = 1000 with 1
-and 2 threads: no faster on this machine (10.4–13 ms per step either way, within the noise),
-and it needs O(N²) memory; not kept.
-
-A loop that reads one array and writes another vectorizes only behind a runtime no-overlap
-check, which fails when the two are the same array: in-place calls therefore go to separate
-kernels that take one array (measured 3.7 vs 0.87 ns per entry for ``cs_halfint``).
+In-place calls go to separate kernels that take one array: LLVM vectorizes a loop that reads
+one array and writes another only behind a runtime no-overlap check, which fails when the two
+are the same array. Timings of these kernels and of the variants that were tried and not
+kept: docs/performance.md, section "Pair-sum engine".
 
 Accuracy of the Gram path
 -------------------------
@@ -76,7 +54,7 @@ import collections
 import numpy as np
 from numba import njit
 
-from . import _threads
+from ..dynamics import _threads
 
 __all__ = [
     "COUNTERS",
@@ -136,8 +114,7 @@ def sqdist_diff(YT, i0, i1, j0, out):  # pragma: no cover - compiled
     m = n - j0
     if k <= 3:
         # the engine's dimensions: one store per entry, coordinates in registers (the
-        # general loop below re-reads and re-writes the row once per coordinate pair:
-        # measured 1.1–1.3 vs 0.2–0.3 ns per entry at k = 2)
+        # general loop below re-reads and re-writes the row once per coordinate pair)
         r0 = YT[0, j0:]
         r1 = YT[min(1, k - 1), j0:]
         r2 = YT[k - 1, j0:]
@@ -388,14 +365,14 @@ def pair_finish(A, centred, out):  # pragma: no cover - compiled
 
 # ------------------------------------------------------------------ compiled strip worker
 # One call per engine thread per step: the whole strip loop (BLAS Gram block, fix-up,
-# kernel, both orientations of the pair sums) runs in compiled code without the GIL.
-# The Python loop over strips (``Scene._pairwise`` fallback) makes 6-10 GIL-releasing
-# calls per strip; with two threads each call's GIL hand-back waits for the other thread's
-# Python work, and on this VM that cost 10-100 µs per hand-off: at k = 10 two threads were no
-# faster than one (2.2-2.9 vs 2.4-2.9 ms per step), with this worker they take ≈ 1 ms.
+# kernel, both orientations of the pair sums) runs in compiled code without the GIL. The
+# Python loop over strips makes 6-10 GIL-releasing calls per strip, and with two threads each
+# call's GIL hand-back waits for the other thread's Python work (docs/performance.md).
 
-#: Kernel kinds the compiled worker evaluates (``kernel._compiled = (kind, a, b)``).
-KIND_CS_HALFINT = 1      # Cucker–Smale G (1 + q)^(−n2/2), a = G, b = n2 (integer ≤ 5)
+#: Kernel kinds the compiled worker evaluates; a kernel's ``compiled_form()`` names them
+#: (``"cs_halfint"``, ``"cs_pow"``, see :mod:`kinred.pairsum`) and the dense backend maps the
+#: names to these codes.
+KIND_CS_HALFINT = 1      # Cucker–Smale G (1 + q)^(−n2/2), a = G, b = n2 (integer >= 0)
 KIND_CS_POW = 2          # Cucker–Smale G (1 + q)^(−β), a = G, b = β (general)
 
 
@@ -633,7 +610,7 @@ def pair_strips(strips, diff, YT, Y, nrm, R, tau, esrc, elast, ekind, epar, ez, 
     source, ``elast``) and both orientations of ``acc[eacc[e]] += Φ Z[ez[e]]`` (each unordered
     pair's φ used twice). ``acc`` is zeroed first; ``epar``, ``tau`` and ``one`` are of the
     stage dtype. Same operations, in the same order, as the Python strip loop of
-    :meth:`kinred.dynamics.Scene._pairwise`.
+    :class:`kinred.pairsum.Dense`.
     """
     N = acc.shape[1]
     ns = YT.shape[0] if diff else Y.shape[0]

@@ -1,0 +1,22 @@
+"""Pair-sum backends: how a scene's pairwise effects are summed over all pairs of agents.
+
+A :class:`~kinred.dynamics.Scene` lists what its pairwise effects call for once
+(:class:`PairTerms`: terms, distance sources, carriers, accumulators, coefficients) and hands
+it to a backend implementing the :class:`PairSum` protocol: ``plan(scene, n, dim)`` once per
+state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
+
+* :class:`Dense` (the default, ``pairsum="fast"``): exact, blocked BLAS products and numba
+  kernels, threads; float64 or mixed float32 pair sums.
+* :class:`Numpy` (``pairsum="numpy"``): the plain-numpy twin, the reference in tests.
+
+A new backend is one file implementing the protocol; kernels may declare a closed form
+through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
+"""
+
+from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form
+from ._select import as_pairsum
+from .dense import Dense, DensePlan
+from .reference import Numpy, NumpyPlan
+
+__all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
+           "as_pairsum", "compiled_form", "COMPILED_KINDS"]

@@ -1,0 +1,431 @@
+r"""The exact dense pair-sum backend: blocked BLAS products and numba kernels.
+
+:class:`Dense` evaluates every pair sum of a scene (see :class:`~kinred.pairsum.PairTerms`)
+exactly, walking over row strips ``I = [i0, i1)`` against columns ``j ≥ i0`` (each unordered
+pair once, memory ``O(N·block)``; strips of about 64k entries, ≈ 512 kB, so a block stays in
+L2), for each distance source the scene needs (``x`` and/or ``v``, never one it does not):
+
+1. squared distances: for ``k ≤ 3`` by differences (numba, vectorized over columns); else
+   a BLAS Gram block ``−2 Y_I Y_Jᵀ`` of centred coordinates written straight into the strip,
+   plus one numba pass that adds the norms and recomputes close pairs by differences
+   (relative error ≤ 4e-13, see ``_kernels``);
+2. kernel values in place on the block (the last term of a source overwrites the
+   distances): the kernel's compiled form if it has one (Cucker–Smale), else its numpy
+   ``value_sq`` or ``kernel(√q)``;
+3. two in-place BLAS products per strip, ``A_I += Φ_I,[i0:] Z_[i0:]`` and, by symmetry,
+   ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` with ``Z = [c z, c]`` (``gemm`` with ``β = 1`` on
+   sub-blocks, no temporaries): one kernel block feeds both orientations, so every unordered
+   pair's kernel is evaluated once. This gives ``Σⱼ cⱼ φᵢⱼ zⱼ`` and the row sums
+   ``Σⱼ cⱼ φᵢⱼ``; the contribution is ``Σⱼ cⱼ φᵢⱼ zⱼ − (Σⱼ cⱼ φᵢⱼ) zᵢ`` with the carrier
+   ``z`` centred (so velocity fluctuations near 1e-15 keep their relative accuracy).
+
+With ``n`` engine threads (:func:`~kinred.dynamics.set_num_threads`) the strips are dealt
+out to ``n`` threads (the calling thread and ``n − 1`` pooled ones; BLAS runs one thread per
+engine thread), each with its own accumulator. When every term's kernel has a compiled form,
+a thread's whole share (steps 1–3 for all its strips) is one compiled call that holds no GIL
+(``_kernels.pair_strips``, BLAS called from numba); otherwise a Python loop makes the same
+calls strip by strip, and each call's GIL hand-back can wait for the other thread.
+
+With ``precision="mixed"`` steps 1–3 (Gram blocks, kernel values, products and accumulators)
+run in float32 (``sgemm``), with close pairs still recomputed from float64 differences; the
+centring before and the combination after them stay in float64.
+
+Timings behind these choices (strip sizes, the compiled worker, variants not kept):
+docs/performance.md, section "Pair-sum engine".
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from .._validate import as_choice, as_int
+from ..dynamics import _threads
+from ..errors import InvalidInput
+from . import _kernels
+from ._base import PairTerms, check_plan_args
+
+__all__ = ["Dense", "DensePlan"]
+
+#: Dimensions up to which distances are computed by differences (numba, vectorized over
+#: columns) rather than by the Gram product plus fix-up.
+SMALL_K = 3
+
+#: Target number of pairwise entries per strip: ≈ 512 kB of float64 for small dimensions (the
+#: block stays in L2 for the elementwise kernel passes) and 2× more from ``BIG_K`` on, where
+#: the BLAS products dominate and thin strips would spend their time packing ``Z`` (a
+#: ``(m, k+1)`` operand re-packed for every strip: overhead ≈ 1/(2·rows) of the flops).
+STRIP_ELEMS = 65_536
+BIG_K = 48
+
+#: Per calling thread: the scratch buffers, reused from step to step (fresh multi-megabyte
+#: arrays every step cost more in page faults than the arithmetic on them).
+_SCRATCH = threading.local()
+_SCRATCH_KEEP = 2                  # signatures kept per thread (e.g. an original and a projection)
+_SCRATCH_MAX_BYTES = 256 * 2**20   # larger workspaces are not kept between calls
+
+_KIND_CODE = {"cs_halfint": _kernels.KIND_CS_HALFINT, "cs_pow": _kernels.KIND_CS_POW}
+
+
+def _scratch(sig: tuple, make) -> dict:
+    """The scratch buffers of signature ``sig`` for the calling thread (``make()`` on first use).
+
+    ``make()`` returns ``(buffers, nbytes)``; workspaces above :data:`_SCRATCH_MAX_BYTES` are
+    used once and released (at that size the arithmetic dwarfs the allocation).
+    """
+    cache = getattr(_SCRATCH, "cache", None)
+    if cache is None:
+        cache = _SCRATCH.cache = {}
+    ws = cache.pop(sig, None)
+    if ws is None:
+        ws, nbytes = make()
+        if nbytes > _SCRATCH_MAX_BYTES:
+            return ws
+        while len(cache) >= _SCRATCH_KEEP:
+            cache.pop(next(iter(cache)))
+    cache[sig] = ws        # most recently used last
+    return ws
+
+
+def strips(n: int, block: int | None, dim: int = 1, nthreads: int = 1, itemsize: int = 8) -> list:
+    """Row strips ``[(i0, i1)]`` of the upper triangle ``j >= i0``.
+
+    With ``block`` given: fixed ``block`` rows per strip. Otherwise strips of about
+    :data:`STRIP_ELEMS` entries each (2× that for ``dim >= BIG_K``; rows ``i0:i1`` against
+    columns ``i0:n``, at most ``entries/512`` rows), so later strips (shorter rows) get more
+    rows and every strip costs about the same (float32 blocks, ``itemsize = 4``: twice the
+    entries, the same bytes). With ``nthreads > 1`` strips are made small enough that there
+    are at least four per thread (load balance).
+    """
+    if block is not None:
+        return [(i0, min(n, i0 + block)) for i0 in range(0, n, block)]
+    elems = STRIP_ELEMS * (2 if dim >= BIG_K else 1) * 8 // itemsize
+    if nthreads > 1:
+        elems = max(4096, min(elems, (n * (n + 1) // 2) // (4 * nthreads)))
+    out = []
+    i0 = 0
+    while i0 < n:
+        bb = min(elems // 512, max(8, elems // max(n - i0, 1)))
+        i1 = min(n, i0 + bb)
+        out.append((i0, i1))
+        i0 = i1
+    return out
+
+
+def _balance(strip_list: list, n: int, nthreads: int) -> tuple:
+    """Strips dealt to ``nthreads`` groups: largest first to the least-loaded (deterministic)."""
+    groups = [[] for _ in range(nthreads)]
+    loads = [0] * nthreads
+    for i0, i1 in sorted(strip_list, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
+        g = loads.index(min(loads))
+        groups[g].append((i0, i1))
+        loads[g] += (i1 - i0) * (n - i0)
+    return tuple(tuple(sorted(gr)) for gr in groups)
+
+
+@dataclass(frozen=True, eq=False)
+class _Worker:
+    """The per-term arrays of the compiled strip worker (``_kernels.pair_strips``)."""
+
+    esrc: np.ndarray      # source index of each term
+    elast: np.ndarray     # last term of its source: may overwrite the distance block
+    ekind: np.ndarray     # compiled kind code
+    epar: np.ndarray      # (a, b) in the stage dtype
+    ez: np.ndarray        # carrier index
+    eacc: np.ndarray      # accumulator index
+    tau: np.floating      # Gram fix-up threshold in the stage dtype
+    groups: tuple         # per thread: (strips, 2) int64
+
+
+@dataclass(frozen=True, eq=False)
+class DensePlan:
+    """Everything :meth:`Dense.evaluate` needs that depends only on the scene and the shape.
+
+    Attributes
+    ----------
+    n, dim : int
+    terms : PairTerms
+    c : (n,) ndarray
+        The coefficients ``c_j``.
+    dtype : numpy.dtype
+        Of the pairwise stage (float32 with ``precision="mixed"``).
+    strips : tuple of (int, int)
+    groups : tuple of tuple of (int, int)
+        The strips of each engine thread.
+    small : bool
+        Distances by differences (``dim <= 3``) rather than Gram blocks.
+    centred : tuple of str
+        State arrays centred per call (carriers, and Gram sources).
+    maxel, need_phi, signature, nbytes
+        Workspace size, whether a second kernel block is needed (a source with two terms),
+        the workspace's cache key and size in bytes.
+    loop : tuple
+        Per source (in ``terms.sources`` order), its terms as ``(term, value_sq or None)``
+        for the Python strip loop.
+    worker : _Worker or None
+        The compiled worker's arrays, when it applies.
+    """
+
+    n: int
+    dim: int
+    terms: PairTerms
+    c: np.ndarray
+    dtype: np.dtype
+    strips: tuple
+    groups: tuple
+    small: bool
+    centred: tuple
+    maxel: int
+    need_phi: bool
+    signature: tuple
+    nbytes: int
+    loop: tuple
+    worker: _Worker | None
+
+
+class Dense:
+    """The exact dense pair-sum backend (the default): blocked BLAS products, numba kernels.
+
+    Parameters
+    ----------
+    block : int, optional
+        Rows per strip (default: strips of about 64k pairwise entries, at most 128 rows;
+        memory ``O(N·block)``).
+    precision : {"double", "mixed"}
+        ``"double"`` (default): everything in float64. ``"mixed"``: the pairwise stage (Gram
+        blocks, kernel values, the two pair-sum products and their accumulators) runs in
+        float32 – about twice the BLAS throughput – while the state, the centring, the fix-up
+        of close pairs (by float64 differences), the final ``Σⱼ cⱼφᵢⱼ zⱼ − (Σⱼ cⱼφᵢⱼ) zᵢ`` and
+        the integrator stay in float64. Carriers are centred before rounding, so the error of
+        a pair sum is relative to the *fluctuation* size (velocity fluctuations near 1e-15
+        keep about 6 digits). Accuracy measured on the paper's runs: docs/dynamics.md.
+    compiled : bool
+        Run a thread's strips as one compiled call when every kernel has a compiled form
+        (default True); False forces the Python strip loop (same operations), for comparison.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Alignment, CuckerSmale, Scene
+    >>> from kinred.pairsum import Dense
+    >>> sc = Scene([Alignment(CuckerSmale(1.0, 0.0))], pairsum=Dense(block=1))
+    >>> sc.rhs(np.array([[0.0], [1.0]]), np.array([[1.0], [-1.0]]))[1].ravel()
+    array([-1.,  1.])
+    """
+
+    def __init__(self, block: int | None = None, precision: str = "double", compiled: bool = True):
+        self.block = None if block is None else as_int(block, "block", low=1)
+        self.precision = as_choice(precision, "precision", ("double", "mixed"))
+        if not isinstance(compiled, (bool, np.bool_)):
+            raise InvalidInput(f"compiled must be True or False, got {compiled!r}")
+        self.compiled = bool(compiled)
+
+    def __repr__(self) -> str:
+        opts = []
+        if self.block is not None:
+            opts.append(f"block={self.block!r}")
+        if self.precision != "double":
+            opts.append(f"precision={self.precision!r}")
+        if not self.compiled:
+            opts.append("compiled=False")
+        return f"Dense({', '.join(opts)})"
+
+    # ------------------------------------------------------------------ plan
+    def plan(self, scene, n: int, dim: int) -> DensePlan:
+        """The plan of ``scene`` for states of shape ``(n, dim)`` with the current engine
+        threads (see :class:`~kinred.pairsum.PairSum`)."""
+        terms, n, dim = check_plan_args(scene, n, dim)
+        forms = [t.compiled for t in terms.terms]
+        ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
+        nthreads = _threads.get_num_threads()
+        st = strips(n, self.block, dim, nthreads, ft.itemsize)
+        nthreads = min(nthreads, len(st))
+        small = dim <= SMALL_K
+        centred = tuple(sorted(set(terms.carriers) | (set() if small else set(terms.sources))))
+        gram = () if small or ft == np.float64 else terms.sources
+        maxel = max((i1 - i0) * (n - i0) for i0, i1 in st)
+        need_phi = any(len(terms.of_source(s)) > 1 for s in terms.sources)
+        nbytes = (8 * n * dim * len(centred) + ft.itemsize * (
+            n * dim * len(gram) + n * (dim + 1) * len(terms.carriers)
+            + nthreads * (n * (dim + 1) * len(terms.accumulators) + maxel * (1 + need_phi)))
+            + 24 * n * nthreads)
+        groups = _balance(st, n, nthreads)
+        use_worker = (self.compiled and _kernels.HAVE_COMPILED_FOR.get(ft, False)
+                      and all(f is not None for f in forms))
+        return DensePlan(
+            n=n, dim=dim, terms=terms, c=scene.coefficients(n), dtype=ft, strips=tuple(st),
+            groups=groups, small=small, centred=centred, maxel=maxel, need_phi=need_phi,
+            signature=(n, dim, centred, terms.carriers, terms.accumulators, nthreads, maxel,
+                       need_phi, ft.char),
+            nbytes=nbytes,
+            loop=tuple(tuple((t, getattr(t.kernel, "value_sq", None)) for t in terms.of_source(s))
+                       for s in terms.sources),
+            worker=_worker(terms, forms, ft, dim, groups) if use_worker else None)
+
+    # ------------------------------------------------------------------ evaluate
+    def evaluate(self, plan: DensePlan, x: np.ndarray, v: np.ndarray | None, rng=None) -> dict:
+        """The pair sums of the plan's scene at ``(x, v)``: ``{target: (n, dim) ndarray}``
+        (fresh arrays; ``rng`` is ignored: the backend is exact)."""
+        if not isinstance(plan, DensePlan) or x.shape != (plan.n, plan.dim):
+            raise InvalidInput(f"plan must be a DensePlan for states of shape (n, dim) = "
+                               f"{getattr(plan, 'n', '?'), getattr(plan, 'dim', '?')}; got "
+                               f"{type(plan).__name__} and x of shape {x.shape}")
+        state = {"x": x, "v": v}
+        ws = _scratch(plan.signature, partial(_workspace, plan))
+        for key in plan.centred:
+            _kernels.centre_rows(np.ascontiguousarray(state[key]), ws["centred"][key])
+        geo = _geometry(plan, state, ws)
+        for key in plan.terms.carriers:
+            _kernels.zext_rows(ws["centred"][key], plan.c, ws["zext"][key])
+        if plan.worker is not None:
+            work = partial(_compiled_share, plan, ws, _stacked(plan, state, geo, ws))
+        else:
+            work = partial(_loop_share, plan, ws, state, geo)
+        # group 0 in the calling thread, BLAS single-threaded for the whole region
+        accs = _threads.run_parallel(work, list(plan.groups))
+        if plan.worker is not None:
+            for s in plan.terms.sources:
+                _kernels.COUNTERS[s] += len(plan.strips)
+        return _finish(plan, accs, ws["centred"])
+
+
+def _worker(terms: PairTerms, forms: list, ft: np.dtype, dim: int, groups: tuple) -> _Worker:
+    """The compiled worker's per-term arrays (built once per plan)."""
+    tt = terms.terms
+    elast = np.zeros(len(tt), dtype=np.bool_)
+    for s in terms.sources:
+        elast[max(i for i, t in enumerate(tt) if t.source == s)] = True
+    return _Worker(
+        esrc=np.array([terms.sources.index(t.source) for t in tt], dtype=np.int64),
+        elast=elast,
+        ekind=np.array([_KIND_CODE[f[0]] for f in forms], dtype=np.int64),
+        epar=np.array([[f[1], f[2]] for f in forms], dtype=ft),
+        ez=np.array([terms.carriers.index(t.carrier) for t in tt], dtype=np.int64),
+        eacc=np.array([terms.accumulators.index((t.target, t.carrier)) for t in tt],
+                      dtype=np.int64),
+        tau=ft.type(_kernels.tau_for(dim, ft)),
+        groups=tuple(np.array(g, dtype=np.int64).reshape(-1, 2) for g in groups))
+
+
+def _workspace(plan: DensePlan):
+    """Fresh scratch buffers of ``plan`` and their size: ``(buffers, nbytes)``."""
+    n, dim, ft, terms = plan.n, plan.dim, plan.dtype, plan.terms
+    nthreads = len(plan.groups)
+    gram = () if plan.small or ft == np.float64 else terms.sources
+    acc3 = [np.empty((len(terms.accumulators), n, dim + 1), ft) for _ in range(nthreads)]
+    return {
+        "centred": {key: np.empty((n, dim)) for key in plan.centred},
+        "single": {key: np.empty((n, dim), ft) for key in gram},
+        "zext": {key: np.empty((n, dim + 1), ft) for key in terms.carriers},
+        # per thread: accumulators (one (n, dim+1) block per (target, carrier)), distance
+        # block, second kernel block, scratch rows of the compiled kernels
+        "acc3": acc3,
+        "acc": [{kk: A[i] for i, kk in enumerate(terms.accumulators)} for A in acc3],
+        "q": [np.empty(plan.maxel, ft) for _ in range(nthreads)],
+        "phi": [np.empty(plan.maxel, ft) if plan.need_phi else np.empty(1, ft)
+                for _ in range(nthreads)],
+        "scr": [np.empty((3, n)) for _ in range(nthreads)],
+    }, plan.nbytes
+
+
+def _geometry(plan: DensePlan, state: dict, ws: dict) -> dict:
+    """Per source: transposed raw rows (differences, small dimension) or the Gram operand
+    (centred rows; with "mixed" rounded to float32) and its squared row norms (float64 norms
+    of the rounded rows, so that the Gram formula is consistent)."""
+    geo = {}
+    ft = plan.dtype
+    for s in plan.terms.sources:
+        if plan.small:
+            geo[s] = (np.ascontiguousarray(state[s].T), None)
+        else:
+            Y = ws["centred"][s] if ft == np.float64 else ws["single"][s]
+            nrm = _kernels.gram_rows(ws["centred"][s], Y, np.empty(plan.n, ft), ft != np.float64)
+            geo[s] = (Y, nrm)
+    return geo
+
+
+def _stacked(plan: DensePlan, state: dict, geo: dict, ws: dict) -> tuple:
+    """The compiled worker's per-source operands, stacked: ``(YT, Y, nrm, R, Z)``."""
+    sources, ft = plan.terms.sources, plan.dtype
+    ns = len(sources)
+
+    def stack(arrs):
+        return arrs[0][None] if len(arrs) == 1 else np.stack(arrs)
+
+    if plan.small:
+        YT = stack([geo[s][0] for s in sources])
+        Yg, nrm, Rg = np.empty((ns, 0, 0), ft), np.empty((ns, 0), ft), np.empty((ns, 0, 0))
+    else:
+        YT = np.empty((ns, 0, 0))
+        Yg = stack([geo[s][0] for s in sources])
+        nrm = stack([geo[s][1] for s in sources])
+        Rg = stack([np.ascontiguousarray(state[s]) for s in sources])
+    return YT, Yg, nrm, Rg, stack([ws["zext"][key] for key in plan.terms.carriers])
+
+
+def _compiled_share(plan: DensePlan, ws: dict, ops: tuple, g: int, my_strips) -> dict:
+    """Thread ``g``'s strips in one compiled call without the GIL (``_kernels.pair_strips``:
+    the same operations as :func:`_loop_share`)."""
+    w = plan.worker
+    YT, Yg, nrm, Rg, Zs = ops
+    _kernels.pair_strips(w.groups[g], plan.small, YT, Yg, nrm, Rg, w.tau, w.esrc, w.elast,
+                         w.ekind, w.epar, w.ez, w.eacc, Zs, ws["acc3"][g], ws["q"][g],
+                         ws["phi"][g], ws["scr"][g], plan.dtype.type(1.0))
+    return ws["acc"][g]
+
+
+def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_strips) -> dict:
+    """Thread ``g``'s strips, strip by strip from Python (kernels without compiled form)."""
+    acc = ws["acc"][g]
+    for A in acc.values():
+        A.fill(0.0)
+    n = plan.n
+    qbuf, pbuf = ws["q"][g], ws["phi"][g]
+    for i0, i1 in my_strips:
+        bb, m = i1 - i0, n - i0
+        for s, terms in zip(plan.terms.sources, plan.loop):
+            q = qbuf[: bb * m].reshape(bb, m)
+            Y, nn = geo[s]
+            if nn is None:
+                _kernels.sqdist_rows(Y, i0, i1, i0, q)
+            else:
+                R = state[s]
+                _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q, R[i0:i1], R[i0:],
+                                      diag=0)
+            _kernels.COUNTERS[s] += 1
+            for idx, (t, value_sq) in enumerate(terms):
+                # the last term of a source may overwrite the distances
+                phi = q if idx == len(terms) - 1 else pbuf[: bb * m].reshape(bb, m)
+                if value_sq is not None:
+                    value_sq(q, phi)
+                else:
+                    phi[...] = t.kernel(np.sqrt(q))
+                _pair_products(phi, ws["zext"][t.carrier], acc[(t.target, t.carrier)], i0, i1, n)
+    return acc
+
+
+def _pair_products(phi: np.ndarray, Z: np.ndarray, A: np.ndarray, i0: int, i1: int, n: int):
+    """Rows of the strip, ``A_I += Φ_I,[i0:] Z_[i0:]``; columns beyond it, by symmetry,
+    ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` (each unordered pair's φ used twice)."""
+    _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
+    if i1 < n:
+        _threads.gemm(1.0, phi[:, i1 - i0:], Z[i0:i1], 1.0, A[i1:], trans_a=True)
+
+
+def _finish(plan: DensePlan, accs: list, centred: dict) -> dict:
+    """Sum the threads' accumulators and form ``Σⱼ cⱼφᵢⱼ zⱼ − (Σⱼ cⱼφᵢⱼ) zᵢ`` per
+    ``(target, carrier)``, summed per target into fresh arrays."""
+    out = {}
+    for kk in plan.terms.accumulators:
+        A = accs[0][kk]
+        for other in accs[1:]:
+            A += other[kk]
+        tgt, carrier = kk
+        contrib = _kernels.pair_finish(A, centred[carrier], np.empty((plan.n, plan.dim)))
+        if tgt in out:
+            out[tgt] += contrib
+        else:
+            out[tgt] = contrib
+    return out
