@@ -156,13 +156,19 @@ class Guard:
         self.lo = math.inf
         self.anchor = (t0, 0.0)
         self.q0 = self._q(v0)[0]
+        if not math.isfinite(self.q0):
+            # velocities so large that their squares overflow float64 (|v| ~ 1e154 and up):
+            # the guard cannot compare energies; the non-finite check stays on
+            self.active = False
+            return
         self._update(t0, self.q0)
 
     def _q(self, v):
-        sq = float(self.w @ np.einsum("ij,ij->i", v, v))
-        if self.budget.centred:
-            m = self.w @ v
-            return max(sq - float(m @ m), 0.0), sq
+        with np.errstate(over="ignore", invalid="ignore"):
+            sq = float(self.w @ np.einsum("ij,ij->i", v, v))
+            if self.budget.centred:
+                m = self.w @ v
+                return max(sq - float(m @ m), 0.0), sq
         return sq, sq
 
     def _key(self, t, q):
