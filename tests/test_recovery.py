@@ -372,7 +372,7 @@ def test_chunked_threads_give_the_same_solutions(monkeypatch):
     """Rows are independent problems: the chunked iteration over two threads gives what one
     thread and what one single chunk give, bit for bit (reproducible whatever the threads)."""
     import kinred.recovery._solver as solver
-    from kinred.dynamics._threads import num_threads
+    from kinred._parallel import num_threads
 
     rng = np.random.default_rng(5)
     Ms = gaussian_projections(rng, 6, 20, 200)

@@ -61,10 +61,11 @@ from typing import Sequence
 
 import numpy as np
 
+from .. import _parallel
 from .._validate import as_array, as_choice, as_float, as_int, as_weights
 from ..errors import InvalidInput, NotProjectable
 from ..projection import as_projection
-from . import _kernels, _threads
+from . import _kernels
 from .effects import Effect
 
 __all__ = ["Scene", "project_state"]
@@ -337,7 +338,7 @@ class Scene:
         carriers = sorted({e.carrier for e in self._pair})
         need_centred = sorted(set(carriers) | {s for s in sources if dim > _SMALL_K})
         keys = sorted({(self._tgt(e), e.carrier) for e in self._pair})
-        nthreads = _threads.get_num_threads()
+        nthreads = _parallel.get_num_threads()
         # pairwise-stage dtype: float64, or float32 with precision="mixed"
         ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
         strips = _strips(n, self.block, dim, nthreads, ft.itemsize)
@@ -458,10 +459,10 @@ class Scene:
                         A = acc[kk]
                         # rows of the strip: Φ_I,[i0:] @ Z[i0:]; columns beyond it, by
                         # symmetry: Φ_I,[i1:]ᵀ @ Z_I (each unordered pair's φ used twice)
-                        _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
+                        _parallel.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
                         if i1 < n:
-                            _threads.gemm(1.0, phi[:, bb:], Z[i0:i1], 1.0, A[i1:],
-                                          trans_a=True)
+                            _parallel.gemm(1.0, phi[:, bb:], Z[i0:i1], 1.0, A[i1:],
+                                           trans_a=True)
             return acc
 
         # balance: largest strip first to the least-loaded thread (deterministic)
@@ -472,7 +473,7 @@ class Scene:
             groups[g].append((i0, i1))
             loads[g] += (i1 - i0) * (n - i0)
         # group 0 in the calling thread, BLAS single-threaded for the whole region
-        accs = _threads.run_parallel(work, [sorted(gr) for gr in groups])
+        accs = _parallel.run_parallel(work, [sorted(gr) for gr in groups])
         if compiled:
             for s in sources:
                 _kernels.COUNTERS[s] += len(strips)

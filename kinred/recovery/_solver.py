@@ -58,10 +58,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._parallel import get_num_threads, run_parallel
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ..dynamics._threads import get_num_threads, run_parallel
 from ._kernels import admm_step, support_solve
 
 __all__ = [
