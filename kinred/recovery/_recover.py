@@ -133,6 +133,37 @@ def recover(
     >>> bool(rec.relative_error.max() < 1e-8)
     True
     """
+    projections, projected_trajectories = _as_sequences(projections, projected_trajectories)
+    A = stack_projections(list(projections))
+    d = A.shape[1]
+    ks = [int(stack_projections([P]).shape[0]) for P in projections]
+    trajs = _check_trajectories(projected_trajectories, ks)
+    T, N = trajs[0].shape[:2]
+    Y = np.vstack([Yl.reshape(T * N, -1).T for Yl in trajs])  # (m, T*N), column t*N + i
+    eta_cols, rule, est = _eta_columns(eta, A, Y, (T, N), ks, safety)
+    res = basis_pursuit(A, Y, eta_cols, nonneg=nonneg, tol=tol, max_iter=max_iter)
+    X = res.Z.T.reshape(T, N, d)
+    err = None
+    if original is not None:
+        X0 = as_array(original, "original", shape=(T, N, d))
+        err = relative_error(X, X0)
+    return TrajectoryRecovery(
+        X=X,
+        eta=res.param.reshape(T, N),
+        status=res.status.reshape(T, N),
+        iterations=res.iterations.reshape(T, N),
+        relative_error=err,
+        L=len(projections),
+        k=A.shape[0],
+        d=d,
+        eta_rule=rule,
+        solve=res,
+        eta_estimate=est,
+    )
+
+
+def _as_sequences(projections, projected_trajectories):
+    """Both arguments as sequences of the same length ``L`` (one array each wrapped)."""
     if isinstance(projections, (Projection, np.ndarray)):
         projections = [projections]
     if isinstance(projected_trajectories, np.ndarray):
@@ -147,9 +178,12 @@ def recover(
             f"projections and projected_trajectories must have the same length L, got "
             f"{len(projections)} and {len(projected_trajectories)}"
         )
-    A = stack_projections(list(projections))
-    m, d = A.shape
-    ks = [int(stack_projections([P]).shape[0]) for P in projections]
+    return projections, projected_trajectories
+
+
+def _check_trajectories(projected_trajectories, ks) -> list:
+    """The ``L`` arrays ``(T, N, k_ℓ)``, checked against the projections' row counts ``ks``
+    and against each other."""
     trajs = []
     for ell, (Yl, k) in enumerate(zip(projected_trajectories, ks)):
         Yl = as_array(Yl, f"projected_trajectories[{ell}]", ndim=3)
@@ -164,37 +198,17 @@ def recover(
                 f"first two axes like projected_trajectories[0], got {Yl.shape}"
             )
         trajs.append(Yl)
-    T, N = trajs[0].shape[:2]
-    Y = np.vstack([Yl.reshape(T * N, -1).T for Yl in trajs])  # (m, T*N), column t*N + i
-    est = None
+    return trajs
+
+
+def _eta_columns(eta, A, Y, TN, ks, safety):
+    """``(η per column or scalar, rule, EtaEstimate or None)``: given, or estimated with the
+    agents of one saved time as a group and the ``L`` blocks as folds."""
+    T, N = TN
     if isinstance(eta, str):
         as_choice(eta, "eta", ("auto",))
         est = estimate_eta(A, Y, groups=np.repeat(np.arange(T), N), blocks=ks, safety=safety)
-        eta_cols = est.eta
-        rule = est.rule
-    else:
-        if np.ndim(eta) == 0:
-            eta_cols = eta
-        else:
-            e = as_array(eta, "eta", shape=(T, N))
-            eta_cols = e.reshape(-1)
-        rule = "given"
-    res = basis_pursuit(A, Y, eta_cols, nonneg=nonneg, tol=tol, max_iter=max_iter)
-    X = res.Z.T.reshape(T, N, d)
-    err = None
-    if original is not None:
-        X0 = as_array(original, "original", shape=(T, N, d))
-        err = relative_error(X, X0)
-    return TrajectoryRecovery(
-        X=X,
-        eta=res.param.reshape(T, N),
-        status=res.status.reshape(T, N),
-        iterations=res.iterations.reshape(T, N),
-        relative_error=err,
-        L=len(projections),
-        k=m,
-        d=d,
-        eta_rule=rule,
-        solve=res,
-        eta_estimate=est,
-    )
+        return est.eta, est.rule, est
+    if np.ndim(eta) == 0:
+        return eta, "given", None
+    return as_array(eta, "eta", shape=(T, N)).reshape(-1), "given", None
