@@ -36,6 +36,7 @@ The inner LASSO solves are truncated (``tol``, ``max_iter``): at low noise they 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,6 +140,8 @@ def estimate_eta(
     Y = _check_Y(Y, A.shape[0])
     m = A.shape[0]
     n = Y.shape[1]
+    if n == 0:
+        raise InvalidInput(f"Y must have at least one column to estimate eta from, got shape {Y.shape}")
     safety = as_float(safety, "safety", low=0.0)
     n_lambdas = as_int(n_lambdas, "n_lambdas", low=2)
     lambda_min_ratio = as_float(
@@ -188,7 +191,12 @@ def _folds(blocks, m: int) -> list:
     interleaved row folds."""
     if blocks is None:
         blocks = [m]
-    bounds = np.cumsum([0] + list(blocks))
+    elif isinstance(blocks, (str, bytes)) or not isinstance(blocks, (Sequence, np.ndarray)):
+        raise InvalidInput(
+            f"blocks must be a sequence of positive integers summing to m = {m}, got {blocks!r}"
+        )
+    sizes = [as_int(b, f"blocks[{i}]") for i, b in enumerate(blocks)]
+    bounds = np.cumsum([0] + sizes)
     if bounds[-1] != m or np.any(np.diff(bounds) <= 0):
         raise InvalidInput(f"blocks must be positive sizes summing to m = {m}, got {list(blocks)}")
     if len(blocks) < 2:

@@ -10,7 +10,7 @@ from .._validate import as_array, as_choice
 from ..errors import InvalidInput
 from ..projection import Projection
 from ._eta import EtaEstimate, estimate_eta
-from ._solver import RecoveryResult, basis_pursuit, stack_projections
+from ._solver import RecoveryResult, _check_param, basis_pursuit, stack_projections
 
 __all__ = ["TrajectoryRecovery", "recover", "relative_error"]
 
@@ -139,20 +139,21 @@ def recover(
     ks = [int(stack_projections([P]).shape[0]) for P in projections]
     trajs = _check_trajectories(projected_trajectories, ks)
     T, N = trajs[0].shape[:2]
+    eta_cols = _check_eta(eta, T, N)
+    X0 = None if original is None else as_array(original, "original", shape=(T, N, d))
     Y = np.vstack([Yl.reshape(T * N, -1).T for Yl in trajs])  # (m, T*N), column t*N + i
-    eta_cols, rule, est = _eta_columns(eta, A, Y, (T, N), ks, safety)
+    est, rule = None, "given"
+    if eta_cols is None:   # "auto": one group per saved time, the L blocks as folds
+        est = estimate_eta(A, Y, groups=np.repeat(np.arange(T), N), blocks=ks, safety=safety)
+        eta_cols, rule = est.eta, est.rule
     res = basis_pursuit(A, Y, eta_cols, nonneg=nonneg, tol=tol, max_iter=max_iter)
     X = res.Z.T.reshape(T, N, d)
-    err = None
-    if original is not None:
-        X0 = as_array(original, "original", shape=(T, N, d))
-        err = relative_error(X, X0)
     return TrajectoryRecovery(
         X=X,
         eta=res.param.reshape(T, N),
         status=res.status.reshape(T, N),
         iterations=res.iterations.reshape(T, N),
-        relative_error=err,
+        relative_error=None if X0 is None else relative_error(X, X0),
         L=len(projections),
         k=A.shape[0],
         d=d,
@@ -192,6 +193,11 @@ def _check_trajectories(projected_trajectories, ks) -> list:
                 f"projected_trajectories[{ell}] must have last axis k = {k} (rows of projections[{ell}]), "
                 f"got shape {Yl.shape}"
             )
+        if not trajs and 0 in Yl.shape[:2]:
+            raise InvalidInput(
+                f"projected_trajectories[{ell}] must hold at least one saved time and one agent, "
+                f"got shape {Yl.shape}"
+            )
         if trajs and Yl.shape[:2] != trajs[0].shape[:2]:
             raise InvalidInput(
                 f"projected_trajectories[{ell}] must have shape (T, N) = {trajs[0].shape[:2]} in its "
@@ -201,14 +207,12 @@ def _check_trajectories(projected_trajectories, ks) -> list:
     return trajs
 
 
-def _eta_columns(eta, A, Y, TN, ks, safety):
-    """``(η per column or scalar, rule, EtaEstimate or None)``: given, or estimated with the
-    agents of one saved time as a group and the ``L`` blocks as folds."""
-    T, N = TN
+def _check_eta(eta, T: int, N: int):
+    """``η`` per column ``t·N + i`` (validated, so that its errors come before any work), or
+    None for ``"auto"``."""
     if isinstance(eta, str):
         as_choice(eta, "eta", ("auto",))
-        est = estimate_eta(A, Y, groups=np.repeat(np.arange(T), N), blocks=ks, safety=safety)
-        return est.eta, est.rule, est
-    if np.ndim(eta) == 0:
-        return eta, "given", None
-    return as_array(eta, "eta", shape=(T, N)).reshape(-1), "given", None
+        return None
+    if np.ndim(eta) != 0:
+        eta = as_array(eta, "eta", shape=(T, N)).reshape(-1)
+    return _check_param(eta, T * N, "eta")
