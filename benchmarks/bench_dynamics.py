@@ -30,8 +30,9 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from kinred._parallel import blas_threads  # noqa: E402
 from kinred.dynamics import (Alignment, CuckerSmale, Scene, SelfPropulsion,  # noqa: E402
-                             _threads, get_num_threads, set_num_threads)
+                             get_num_threads, set_num_threads)
 from kinred.integrate import SaveAt, simulate  # noqa: E402
 
 
@@ -123,7 +124,7 @@ def main(argv=None):
     times = {"double": {}, "mixed": {}}
     try:
         ns = min(steps, 100)
-        with _threads.blas_threads(1):
+        with blas_threads(1):
             for kk in (2, 5, 10, 25, 50, 100, 150, 200):
                 for prec in ("double", "mixed"):
                     t15 = per_step(N, kk, ns, 1.5, precision=prec)

@@ -87,7 +87,7 @@ import numpy as np
 
 from ._rng import member_seed
 from ._validate import as_choice, as_int
-from .dynamics import _threads as _engine_threads
+from . import _parallel
 from .errors import DamagedFile, InvalidInput, KinredError, KinredWarning
 from .io import ResultFolder, atomic_write_npz, read_npz, to_jsonable
 
@@ -277,7 +277,7 @@ def _run_member(fn, params: dict, master_seed: int, index: int):
     try:
         # one engine thread in every executor: the engine's round-off depends on its thread
         # count, the results must not depend on the executor
-        with _engine_threads.num_threads(1):
+        with _parallel.num_threads(1):
             out = _normalize_output(fn(dict(params), seed))
     except Exception as exc:  # reported to the caller with the member's identity
         return ("error", index, f"{type(exc).__name__}: {exc}", traceback.format_exc())

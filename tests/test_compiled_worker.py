@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
-from kinred.dynamics import _threads
-from kinred.dynamics._threads import num_threads
+from kinred import _parallel
+from kinred._parallel import num_threads
 from kinred.pairsum import Dense, Numpy, _kernels
 
 
@@ -25,9 +25,9 @@ def test_compiled_worker_links_whenever_numpy_ships_openblas():
     # numpy's Linux wheels bundle OpenBLAS with cblas_dgemm/cblas_sgemm: then the worker must
     # link (with another BLAS the engine uses the Python strip loop, tested below)
     for kind, dt in (("d", np.float64), ("s", np.float32)):
-        found = _threads.cblas_gemm_symbol(kind) is not None
+        found = _parallel.cblas_gemm_symbol(kind) is not None
         assert _kernels.HAVE_COMPILED_FOR[np.dtype(dt)] == found
-    assert _threads.cblas_gemm_symbol("d") is not None     # the case on the project's CI
+    assert _parallel.cblas_gemm_symbol("d") is not None     # the case on the project's CI
 
 
 def _ref_pow(q, G, beta):
@@ -158,7 +158,7 @@ def test_blas_stays_single_threaded_inside_the_parallel_region(monkeypatch):
     # numpy's OpenBLAS applies openblas_set_num_threads_local process-wide: a worker that
     # restored the count on its way out used to switch the other worker's BLAS calls back to
     # multithreading mid-step. Now the caller owns the setting for the whole region.
-    get = _threads._BLAS_GET
+    get = _parallel._BLAS_GET
     assert get is not None
     seen = []
     orig = _kernels.pair_strips

@@ -137,23 +137,23 @@ def test_cs_halfint_in_place(n2):
 
 @pytest.mark.parametrize("native", [True, False])
 def test_inplace_gemm_on_sub_blocks(native, monkeypatch):
-    from kinred.dynamics import _threads
+    from kinred import _parallel
     if not native:
-        monkeypatch.setattr(_threads, "HAVE_GEMM", False)
+        monkeypatch.setattr(_parallel, "HAVE_GEMM", False)
     rng = np.random.default_rng(0)
     P = rng.normal(size=(13, 40))                       # a strip; columns 5: are a sub-block
     Z = rng.normal(size=(40, 4))
     A = rng.normal(size=(40, 4))
     A0 = A.copy()
-    _threads.gemm(1.0, P, Z, 1.0, A[:13])               # A_I += P Z
-    _threads.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[5:], trans_a=True)    # A_J += P_Jᵀ Z_I
+    _parallel.gemm(1.0, P, Z, 1.0, A[:13])              # A_I += P Z
+    _parallel.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[5:], trans_a=True)   # A_J += P_Jᵀ Z_I
     expect = A0.copy()
     expect[:13] += np.einsum("ij,jl->il", P, Z)
     expect[5:] += np.einsum("ji,jl->il", P[:, 5:], Z[:13])
     with pytest.raises(ValueError, match="shapes"):
-        _threads.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[18:], trans_a=True)
+        _parallel.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[18:], trans_a=True)
     assert np.max(np.abs(A - expect)) < 1e-13
     C = np.full((13, 35), np.nan)
-    _threads.gemm(-2.0, P[:, :7], Z[:35, :].repeat(2, axis=1)[:, :7], 0.0, C, trans_b=True)
+    _parallel.gemm(-2.0, P[:, :7], Z[:35, :].repeat(2, axis=1)[:, :7], 0.0, C, trans_b=True)
     assert np.max(np.abs(C + 2.0 * np.einsum("il,jl->ij", P[:, :7],
                                               Z[:35].repeat(2, axis=1)[:, :7]))) < 1e-13

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene,
-                             SelfPropulsion, _threads)
-from kinred.dynamics._threads import num_threads
+                             SelfPropulsion)
+from kinred import _parallel
+from kinred._parallel import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import above_floor, gamma_floor, mean_velocity
@@ -141,6 +142,6 @@ def test_float32_kernels_and_sgemm_against_float64():
     P = rng.normal(size=(13, 40)).astype(np.float32)
     Z = rng.normal(size=(40, 4)).astype(np.float32)
     A = np.zeros((40, 4), np.float32)
-    _threads.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[5:], trans_a=True)
+    _parallel.gemm(1.0, P[:, 5:], Z[:13], 1.0, A[5:], trans_a=True)
     expect = np.einsum("ji,jl->il", P[:, 5:].astype(float), Z[:13].astype(float))
     assert np.max(np.abs(A[5:] - expect)) < 1e-5 and np.all(A[:5] == 0.0)

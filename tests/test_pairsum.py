@@ -7,7 +7,7 @@ import pytest
 
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
                              Morse, PairwiseEffect, Quadratic, Scene, SelfPropulsion)
-from kinred.dynamics._threads import num_threads
+from kinred._parallel import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import SaveAt, simulate
 from kinred.kinetic._solution import weighted_scene

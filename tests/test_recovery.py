@@ -347,6 +347,59 @@ def test_recover_validation_errors():
         estimate_eta(stack_projections(Ms), rng.standard_normal((8, 4)), groups=np.zeros(3, int))
 
 
+
+def test_estimate_eta_rejects_bad_blocks_and_empty_data():
+    """Bad ``blocks`` and a ``Y`` without columns escaped as TypeError / IndexError /
+    ValueError; integral float sizes are sizes (the same estimate as integer ones)."""
+    rng = np.random.default_rng(13)
+    A = rng.standard_normal((6, 10))
+    Y = rng.standard_normal((6, 3))
+    with pytest.raises(InvalidInput, match="blocks must be a sequence of positive integers"):
+        estimate_eta(A, Y, blocks=6)
+    with pytest.raises(InvalidInput, match="blocks must be a sequence of positive integers"):
+        estimate_eta(A, Y, blocks="ab")
+    with pytest.raises(InvalidInput, match=r"blocks\[0\] must be an integer, got 2.5"):
+        estimate_eta(A, Y, blocks=[2.5, 3.5])
+    with pytest.raises(InvalidInput, match=r"blocks must be positive sizes summing to m = 6"):
+        estimate_eta(A, Y, blocks=[2, 3])
+    with pytest.raises(InvalidInput, match=r"at least one column .* got shape \(6, 0\)"):
+        estimate_eta(A, np.zeros((6, 0)))
+    A = rng.standard_normal((60, 100)) / np.sqrt(60)
+    X = np.zeros((100, 6))
+    X[:5] = 1.0
+    Y = A @ X + 0.01 * rng.standard_normal((60, 6))
+    ints = estimate_eta(A, Y, groups=np.zeros(6, int), blocks=[20, 20, 20])
+    floats = estimate_eta(A, Y, groups=np.zeros(6, int), blocks=np.array([20.0, 20.0, 20.0]))
+    assert np.array_equal(ints.eta, floats.eta) and ints.rounds == floats.rounds == 3
+    assert 0.5 < ints.sigma[0] / 0.01 < 2.0
+
+
+def test_recover_rejects_empty_trajectories_and_checks_original_before_solving(monkeypatch):
+    """No saved time or no agent escaped as a reshape ValueError; a wrong ``original`` was
+    found only after the whole solve (and the automatic eta)."""
+    import kinred.recovery._recover as recover_mod
+
+    rng = np.random.default_rng(14)
+    Ms = gaussian_projections(rng, 2, 4, 12)
+    with pytest.raises(InvalidInput, match=r"at least one saved time and one agent, got shape \(0, 5, 4\)"):
+        recover(Ms, [np.zeros((0, 5, 4))] * 2, eta=0.0)
+    with pytest.raises(InvalidInput, match="at least one saved time and one agent"):
+        recover(Ms, [np.zeros((3, 0, 4))] * 2)
+
+    def solve_too_early(*args, **kwargs):
+        raise AssertionError("solved before the arguments were checked")
+
+    monkeypatch.setattr(recover_mod, "estimate_eta", solve_too_early)
+    monkeypatch.setattr(recover_mod, "basis_pursuit", solve_too_early)
+    Ys = [rng.standard_normal((3, 5, 4)) for _ in range(2)]
+    for eta in ("auto", 0.1, np.full((3, 5), 0.1)):
+        with pytest.raises(InvalidInput, match=r"original must have shape \(3, 5, 12\)"):
+            recover(Ms, Ys, eta=eta, original=np.zeros((3, 5, 11)))
+    with pytest.raises(InvalidInput, match="eta must be >= 0"):      # eta is still checked first
+        recover(Ms, Ys, eta=-1.0, original=np.zeros((3, 5, 11)))
+    with pytest.raises(InvalidInput, match=r"eta must be >= 0, got -1.0 at index 7"):
+        recover(Ms, Ys, eta=np.where(np.arange(15).reshape(3, 5) == 7, -1.0, 0.1))
+
 def test_support_solve_matches_numpy_and_flags_singular():
     from kinred.recovery._kernels import support_solve
     rng = np.random.default_rng(11)
@@ -372,7 +425,7 @@ def test_chunked_threads_give_the_same_solutions(monkeypatch):
     """Rows are independent problems: the chunked iteration over two threads gives what one
     thread and what one single chunk give, bit for bit (reproducible whatever the threads)."""
     import kinred.recovery._solver as solver
-    from kinred.dynamics._threads import num_threads
+    from kinred._parallel import num_threads
 
     rng = np.random.default_rng(5)
     Ms = gaussian_projections(rng, 6, 20, 200)

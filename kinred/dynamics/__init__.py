@@ -3,7 +3,7 @@
 See docs/dynamics.md for the model, the effects and the normalization conventions.
 """
 
-from ._threads import get_num_threads, set_num_threads
+from .._parallel import get_num_threads, set_num_threads
 from .effects import (
     Aggregation,
     Alignment,

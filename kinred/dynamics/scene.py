@@ -38,7 +38,7 @@ from .._validate import as_array, as_choice, as_float, as_weights
 from ..errors import InvalidInput, NotProjectable
 from ..pairsum import PairTerms, as_pairsum
 from ..projection import as_projection
-from . import _threads
+from .. import _parallel
 from .effects import Effect
 
 __all__ = ["Scene", "project_state"]
@@ -160,7 +160,7 @@ class Scene:
 
     def _plan(self, n: int, dim: int):
         """The backend's plan for states ``(n, dim)`` and the current engine threads (kept)."""
-        key = (n, dim, _threads.get_num_threads())
+        key = (n, dim, _parallel.get_num_threads())
         plan = self._plans.get(key)
         if plan is None:
             plan = self.pairsum.plan(self, n, dim)

@@ -54,7 +54,7 @@ import collections
 import numpy as np
 from numba import njit
 
-from ..dynamics import _threads
+from .. import _parallel
 
 __all__ = [
     "COUNTERS",
@@ -191,7 +191,7 @@ def sqdist_block(Yi: np.ndarray, Yj: np.ndarray, ni: np.ndarray, nj: np.ndarray,
     centring a far-away cloud rounds at its distance scale. ``diag >= 0`` says that row ``a``
     and column ``a + diag`` are the same agent (set to exactly 0).
     """
-    _threads.gemm(-2.0, Yi, Yj, 0.0, out, trans_b=True)
+    _parallel.gemm(-2.0, Yi, Yj, 0.0, out, trans_b=True)
     ty = out.dtype.type
     sqdist_gram_fix(out, ni, nj, Yi if Xi is None else Xi, Yj if Xj is None else Xj,
                     ty(tau_for(Yi.shape[1], out.dtype)), int(diag))
@@ -386,7 +386,7 @@ def _declare_blas():
         return None, None
     out = []
     for kind, scalar in (("d", types.float64), ("s", types.float32)):
-        found = _threads.cblas_gemm_symbol(kind)
+        found = _parallel.cblas_gemm_symbol(kind)
         if found is None:
             out.append(None)
             continue
@@ -648,5 +648,5 @@ def pair_strips(strips, diff, YT, Y, nrm, R, tau, esrc, elast, ekind, epar, ez, 
 
 
 #: Whether the compiled worker can run, per stage dtype (its BLAS symbols were found).
-HAVE_COMPILED_FOR = {np.dtype(np.float64): _XDGEMM is not None and _threads.HAVE_GEMM_FOR[np.dtype(np.float64)],
-                     np.dtype(np.float32): _XSGEMM is not None and _threads.HAVE_GEMM_FOR[np.dtype(np.float32)]}
+HAVE_COMPILED_FOR = {np.dtype(np.float64): _XDGEMM is not None and _parallel.HAVE_GEMM_FOR[np.dtype(np.float64)],
+                     np.dtype(np.float32): _XSGEMM is not None and _parallel.HAVE_GEMM_FOR[np.dtype(np.float32)]}

@@ -43,7 +43,7 @@ from functools import partial
 import numpy as np
 
 from .._validate import as_choice, as_int
-from ..dynamics import _threads
+from .. import _parallel
 from ..errors import InvalidInput
 from . import _kernels
 from ._base import PairTerms, check_plan_args
@@ -239,7 +239,7 @@ class Dense:
         terms, n, dim = check_plan_args(scene, n, dim)
         forms = [t.compiled for t in terms.terms]
         ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
-        nthreads = _threads.get_num_threads()
+        nthreads = _parallel.get_num_threads()
         st = strips(n, self.block, dim, nthreads, ft.itemsize)
         nthreads = min(nthreads, len(st))
         small = dim <= SMALL_K
@@ -284,7 +284,7 @@ class Dense:
         else:
             work = partial(_loop_share, plan, ws, state, geo)
         # group 0 in the calling thread, BLAS single-threaded for the whole region
-        accs = _threads.run_parallel(work, list(plan.groups))
+        accs = _parallel.run_parallel(work, list(plan.groups))
         if plan.worker is not None:
             for s in plan.terms.sources:
                 _kernels.COUNTERS[s] += len(plan.strips)
@@ -409,9 +409,9 @@ def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_st
 def _pair_products(phi: np.ndarray, Z: np.ndarray, A: np.ndarray, i0: int, i1: int, n: int):
     """Rows of the strip, ``A_I += Φ_I,[i0:] Z_[i0:]``; columns beyond it, by symmetry,
     ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` (each unordered pair's φ used twice)."""
-    _threads.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
+    _parallel.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
     if i1 < n:
-        _threads.gemm(1.0, phi[:, i1 - i0:], Z[i0:i1], 1.0, A[i1:], trans_a=True)
+        _parallel.gemm(1.0, phi[:, i1 - i0:], Z[i0:i1], 1.0, A[i1:], trans_a=True)
 
 
 def _finish(plan: DensePlan, accs: list, centred: dict) -> dict:

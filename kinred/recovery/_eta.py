@@ -29,15 +29,14 @@ The rule implemented uses the disagreement between the independent projections i
    with probability about 98 % when ``σ̂ = σ``, and ``η/‖e‖ ≈ √(1 + c√(2/m))``).
 
 At most ``per_group`` evenly spaced columns of each group enter the estimate (cost control).
-Limits, measured on Gaussian 𝓜 (d = 200, kL = 120, 40-sparse signals): at relative noise
-1e-2 the estimate is within a few percent of the true σ; at 1e-3 the truncated inner solves
-overestimate σ (η too large by several times), the recovery error staying within about 2× the
-oracle's. The signal must be sparse enough that ``|Ŝ| < m``; otherwise the group is reported
-as not estimable (pass ``eta`` explicitly).
+The inner LASSO solves are truncated (``tol``, ``max_iter``): at low noise they overestimate σ
+(measured accuracy: docs/performance.md, "Recovery"). The signal must be sparse enough that
+``|Ŝ| < m``; otherwise the group is reported as not estimable (pass ``eta`` explicitly).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,11 +95,11 @@ def estimate_eta(
     tol: float = 1e-4,
     max_iter: int = 500,
 ) -> EtaEstimate:
-    """Choose ``η`` for (3.16) (label ``P1:eta``) from the data (scaled LASSO with refit).
+    """Choose ``η`` for (3.16) (label ``P1:eta``) from the data (block cross-validated LASSO).
 
     See the module docstring for the rule; in short ``η = σ̂ √(m + c√(2m))`` with ``σ̂`` the
-    per-coordinate noise level estimated from the least-squares refit on the support of a
-    LASSO at the universal level ``σ̂ maxⱼ‖aⱼ‖ √(2 log d)``, iterated to a fixed point.
+    per-coordinate noise level: the degrees-of-freedom corrected residual of the LASSO whose
+    ``λ`` predicts held-out blocks best.
 
     Parameters
     ----------
@@ -139,14 +138,41 @@ def estimate_eta(
     """
     A = _check_A(A)
     Y = _check_Y(Y, A.shape[0])
-    m, d = A.shape
+    m = A.shape[0]
     n = Y.shape[1]
+    if n == 0:
+        raise InvalidInput(f"Y must have at least one column to estimate eta from, got shape {Y.shape}")
     safety = as_float(safety, "safety", low=0.0)
     n_lambdas = as_int(n_lambdas, "n_lambdas", low=2)
     lambda_min_ratio = as_float(
         lambda_min_ratio, "lambda_min_ratio", low=0.0, low_open=True, high=1.0, high_open=True
     )
     per_group = as_int(per_group, "per_group", low=1)
+    labels, ng = _group_labels(groups, n)
+    folds = _folds(blocks, m)
+    sel = _subsample(labels, ng, per_group)
+    Ys, ls = Y[:, sel], labels[sel]
+    lam_star = _cv_lambda(A, Ys, ls, ng, folds, n_lambdas, lambda_min_ratio, tol, max_iter)
+    sigma_g, supp = _refit_sigma(A, Ys, ls, ng, lam_star, tol, max_iter)
+    support = np.zeros(n, dtype=np.int64)
+    support[sel] = supp
+    sigma = sigma_g[labels]
+    eta = sigma * np.sqrt(m + safety * np.sqrt(2.0 * m))
+    return EtaEstimate(
+        eta=eta,
+        sigma=sigma,
+        support_size=support,
+        rounds=len(folds),
+        safety=safety,
+        rule=(
+            "block cross-validated LASSO, sigma^2 = sum ||y - A z||^2 / sum (m - |S|); "
+            f"eta = sigma*sqrt(m + {safety:g}*sqrt(2m))"
+        ),
+    )
+
+
+def _group_labels(groups, n: int):
+    """Labels ``0 … ng−1`` of the columns' groups (each column alone if ``groups`` is None)."""
     if groups is None:
         labels = np.arange(n)
     else:
@@ -157,35 +183,50 @@ def estimate_eta(
                 f"got {g.dtype} array of shape {g.shape}"
             )
         _, labels = np.unique(g, return_inverse=True)
-    ng = int(labels.max()) + 1 if n else 0
+    return labels, int(labels.max()) + 1 if n else 0
+
+
+def _folds(blocks, m: int) -> list:
+    """Row indices of the cross-validation folds: the ``L`` blocks, or (one block) 5
+    interleaved row folds."""
     if blocks is None:
         blocks = [m]
-    bounds = np.cumsum([0] + list(blocks))
+    elif isinstance(blocks, (str, bytes)) or not isinstance(blocks, (Sequence, np.ndarray)):
+        raise InvalidInput(
+            f"blocks must be a sequence of positive integers summing to m = {m}, got {blocks!r}"
+        )
+    sizes = [as_int(b, f"blocks[{i}]") for i, b in enumerate(blocks)]
+    bounds = np.cumsum([0] + sizes)
     if bounds[-1] != m or np.any(np.diff(bounds) <= 0):
         raise InvalidInput(f"blocks must be positive sizes summing to m = {m}, got {list(blocks)}")
-    nb = len(blocks)
-    if nb < 2:
+    if len(blocks) < 2:
         # no held-out block available: split the rows into 5 interleaved folds
-        fold_rows = [np.arange(f, m, 5) for f in range(min(5, m))]
-    else:
-        fold_rows = [np.arange(bounds[i], bounds[i + 1]) for i in range(nb)]
+        return [np.arange(f, m, 5) for f in range(min(5, m))]
+    return [np.arange(bounds[i], bounds[i + 1]) for i in range(len(blocks))]
+
+
+def _subsample(labels, ng: int, per_group: int):
+    """At most ``per_group`` evenly spaced columns of each group."""
+    def spaced(cols):
+        return cols[np.unique(np.linspace(0, cols.size - 1, min(per_group, cols.size)).astype(int))]
+
+    return np.concatenate([spaced(np.flatnonzero(labels == g)) for g in range(ng)])
+
+
+def _cv_lambda(A, Y, labels, ng, folds, n_lambdas, lambda_min_ratio, tol, max_iter):
+    """Per column, the ``λ`` of the geometric grid (``n_lambdas`` values from ``‖Aᵀy‖∞`` down to
+    ``lambda_min_ratio`` times it) with the smallest held-out error summed over the folds and
+    over the column's group."""
+    m = A.shape[0]
+    n = Y.shape[1]
     G = int(n_lambdas)
-    # at most `per_group` evenly spaced columns of each group enter the estimate
-    sel = np.concatenate([
-        (lambda c: c[np.unique(np.linspace(0, c.size - 1, min(per_group, c.size)).astype(int))])(
-            np.flatnonzero(labels == g_)
-        )
-        for g_ in range(ng)
-    ])
-    Y_all, labels_all, n_all = Y, labels, n
-    Y, labels, n = Y[:, sel], labels[sel], sel.size
     lam_max = np.max(np.abs(A.T @ Y), axis=0)  # λ ≥ ‖Aᵀy‖∞ gives z = 0
     ratios = np.logspace(0.0, np.log10(lambda_min_ratio), G + 1)[1:]
     lam_grid = lam_max[:, None] * ratios[None, :]  # (n, G)
     YG = np.repeat(Y, G, axis=1)  # column j*G + g
     lamG = lam_grid.ravel()
     cv = np.zeros(n * G)
-    for rows in fold_rows:
+    for rows in folds:
         train = np.setdiff1d(np.arange(m), rows)
         res = lasso(A[train], YG[train], lamG, tol=tol, max_iter=max_iter)
         pred = A[rows] @ res.Z
@@ -193,35 +234,23 @@ def estimate_eta(
     cv_g = np.zeros((ng, G))
     np.add.at(cv_g, labels, cv.reshape(n, G))
     best = np.argmin(cv_g, axis=1)  # per group
-    lam_star = lam_grid[np.arange(n), best[labels]]
+    return lam_grid[np.arange(n), best[labels]]
+
+
+def _refit_sigma(A, Y, labels, ng, lam_star, tol, max_iter):
+    """``σ̂`` per group from the LASSO at ``λ*`` (degrees-of-freedom corrected residual) and
+    the support size per column."""
+    m = A.shape[0]
     full = lasso(A, Y, lam_star, tol=tol, max_iter=max_iter)
     supp = np.count_nonzero(full.Z, axis=0)
     dof = np.maximum(m - supp, 0).astype(float)
     rss = full.residual**2
     num = np.bincount(labels, weights=np.where(dof > 0, rss, 0.0), minlength=ng)
     den = np.bincount(labels, weights=dof, minlength=ng)
-    sigma_g = np.sqrt(num / np.where(den > 0, den, np.nan))
     if np.any(den <= 0):
         bad = np.flatnonzero(den <= 0)
         raise InvalidInput(
             f"cannot estimate eta for group(s) {bad[:5].tolist()}: the cross-validated LASSO support "
             f"has >= m = {m} entries (signal not sparse enough for m); pass eta explicitly"
         )
-    rounds = len(fold_rows)
-    Y, labels, n = Y_all, labels_all, n_all
-    supp_all = np.zeros(n, dtype=np.int64)
-    supp_all[sel] = supp
-    supp = supp_all
-    sigma = sigma_g[labels]
-    eta = sigma * np.sqrt(m + safety * np.sqrt(2.0 * m))
-    return EtaEstimate(
-        eta=eta,
-        sigma=sigma,
-        support_size=supp,
-        rounds=rounds,
-        safety=safety,
-        rule=(
-            "block cross-validated LASSO, sigma^2 = sum ||y - A z||^2 / sum (m - |S|); "
-            f"eta = sigma*sqrt(m + {safety:g}*sqrt(2m))"
-        ),
-    )
+    return np.sqrt(num / den), supp

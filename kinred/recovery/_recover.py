@@ -10,7 +10,7 @@ from .._validate import as_array, as_choice
 from ..errors import InvalidInput
 from ..projection import Projection
 from ._eta import EtaEstimate, estimate_eta
-from ._solver import RecoveryResult, basis_pursuit, stack_projections
+from ._solver import RecoveryResult, _check_param, basis_pursuit, stack_projections
 
 __all__ = ["TrajectoryRecovery", "recover", "relative_error"]
 
@@ -133,6 +133,38 @@ def recover(
     >>> bool(rec.relative_error.max() < 1e-8)
     True
     """
+    projections, projected_trajectories = _as_sequences(projections, projected_trajectories)
+    A = stack_projections(list(projections))
+    d = A.shape[1]
+    ks = [int(stack_projections([P]).shape[0]) for P in projections]
+    trajs = _check_trajectories(projected_trajectories, ks)
+    T, N = trajs[0].shape[:2]
+    eta_cols = _check_eta(eta, T, N)
+    X0 = None if original is None else as_array(original, "original", shape=(T, N, d))
+    Y = np.vstack([Yl.reshape(T * N, -1).T for Yl in trajs])  # (m, T*N), column t*N + i
+    est, rule = None, "given"
+    if eta_cols is None:   # "auto": one group per saved time, the L blocks as folds
+        est = estimate_eta(A, Y, groups=np.repeat(np.arange(T), N), blocks=ks, safety=safety)
+        eta_cols, rule = est.eta, est.rule
+    res = basis_pursuit(A, Y, eta_cols, nonneg=nonneg, tol=tol, max_iter=max_iter)
+    X = res.Z.T.reshape(T, N, d)
+    return TrajectoryRecovery(
+        X=X,
+        eta=res.param.reshape(T, N),
+        status=res.status.reshape(T, N),
+        iterations=res.iterations.reshape(T, N),
+        relative_error=None if X0 is None else relative_error(X, X0),
+        L=len(projections),
+        k=A.shape[0],
+        d=d,
+        eta_rule=rule,
+        solve=res,
+        eta_estimate=est,
+    )
+
+
+def _as_sequences(projections, projected_trajectories):
+    """Both arguments as sequences of the same length ``L`` (one array each wrapped)."""
     if isinstance(projections, (Projection, np.ndarray)):
         projections = [projections]
     if isinstance(projected_trajectories, np.ndarray):
@@ -147,9 +179,12 @@ def recover(
             f"projections and projected_trajectories must have the same length L, got "
             f"{len(projections)} and {len(projected_trajectories)}"
         )
-    A = stack_projections(list(projections))
-    m, d = A.shape
-    ks = [int(stack_projections([P]).shape[0]) for P in projections]
+    return projections, projected_trajectories
+
+
+def _check_trajectories(projected_trajectories, ks) -> list:
+    """The ``L`` arrays ``(T, N, k_ℓ)``, checked against the projections' row counts ``ks``
+    and against each other."""
     trajs = []
     for ell, (Yl, k) in enumerate(zip(projected_trajectories, ks)):
         Yl = as_array(Yl, f"projected_trajectories[{ell}]", ndim=3)
@@ -158,43 +193,26 @@ def recover(
                 f"projected_trajectories[{ell}] must have last axis k = {k} (rows of projections[{ell}]), "
                 f"got shape {Yl.shape}"
             )
+        if not trajs and 0 in Yl.shape[:2]:
+            raise InvalidInput(
+                f"projected_trajectories[{ell}] must hold at least one saved time and one agent, "
+                f"got shape {Yl.shape}"
+            )
         if trajs and Yl.shape[:2] != trajs[0].shape[:2]:
             raise InvalidInput(
                 f"projected_trajectories[{ell}] must have shape (T, N) = {trajs[0].shape[:2]} in its "
                 f"first two axes like projected_trajectories[0], got {Yl.shape}"
             )
         trajs.append(Yl)
-    T, N = trajs[0].shape[:2]
-    Y = np.vstack([Yl.reshape(T * N, -1).T for Yl in trajs])  # (m, T*N), column t*N + i
-    est = None
+    return trajs
+
+
+def _check_eta(eta, T: int, N: int):
+    """``η`` per column ``t·N + i`` (validated, so that its errors come before any work), or
+    None for ``"auto"``."""
     if isinstance(eta, str):
         as_choice(eta, "eta", ("auto",))
-        est = estimate_eta(A, Y, groups=np.repeat(np.arange(T), N), blocks=ks, safety=safety)
-        eta_cols = est.eta
-        rule = est.rule
-    else:
-        if np.ndim(eta) == 0:
-            eta_cols = eta
-        else:
-            e = as_array(eta, "eta", shape=(T, N))
-            eta_cols = e.reshape(-1)
-        rule = "given"
-    res = basis_pursuit(A, Y, eta_cols, nonneg=nonneg, tol=tol, max_iter=max_iter)
-    X = res.Z.T.reshape(T, N, d)
-    err = None
-    if original is not None:
-        X0 = as_array(original, "original", shape=(T, N, d))
-        err = relative_error(X, X0)
-    return TrajectoryRecovery(
-        X=X,
-        eta=res.param.reshape(T, N),
-        status=res.status.reshape(T, N),
-        iterations=res.iterations.reshape(T, N),
-        relative_error=err,
-        L=len(projections),
-        k=m,
-        d=d,
-        eta_rule=rule,
-        solve=res,
-        eta_estimate=est,
-    )
+        return None
+    if np.ndim(eta) != 0:
+        eta = as_array(eta, "eta", shape=(T, N)).reshape(-1)
+    return _check_param(eta, T * N, "eta")

@@ -26,13 +26,18 @@ eigendecomposition ``AAᵀ = U diag(σ²) Uᵀ`` (once per solve) the iteration 
 ``Uᵀ(Az) = b̃ − w̃`` – two products with ``(m, d)`` matrices per iteration and no ``m × m``
 one (the ``v``-step, a ball around ``y`` or the LASSO average, commutes with ``U``). Columns
 are independent problems: they are iterated in chunks of 128 rows that stay in cache, dealt to
-the engine's threads (:func:`kinred.dynamics.set_num_threads`). The penalty ``μ`` enters
+the threads of :func:`kinred.dynamics.set_num_threads`. The penalty ``μ`` enters
 only as the threshold of the ``u``-prox (``(I + AᵀA)⁻¹`` does not depend on it), so each
 column has its own ``μ``, adapted by residual balancing without any re-factorization.
 
-Per-column scaling: ``A`` is divided by its spectral norm and every column ``y`` by its norm
-(``η`` and ``λ`` accordingly), so one starting penalty suits all columns. Converged columns are
-dropped from the batch at every check (every ``check_every`` iterations).
+Per-column scaling: ``A`` is scaled to spectral norm ``ω = 10`` and every column ``y`` to unit
+norm (``η`` and ``λ`` accordingly), so one starting penalty suits all columns.
+
+The solve runs in phases: *setup* (spectral data of ``A``), *trivial columns* (``z = 0``
+optimal, or the constraint infeasible: no iteration), the *sweep* over a batch of the other
+columns (every ``check_every`` iterations: residuals, polish, residual balancing, and the
+finished columns leave the batch), and *finalize* (residuals and objectives in the original
+scaling).
 
 Certified polish: at each check, columns whose sign pattern did not change since the previous
 check are polished on their support ``S`` with signs ``s``. For BPDN the exact KKT point on
@@ -47,22 +52,26 @@ check are polished on their support ``S`` with signs ``s``. For BPDN the exact K
 the signs agree and the dual certificate ``‖Aᵀ(y − Az)‖∞ ≤ λ(1 + cert_tol)`` holds. For basis
 pursuit (``η = 0``) the polished point is the least-squares solution on ``S`` (it must satisfy
 ``Az = y``) and the certificate is the ADMM dual vector corrected onto
-``{ν : A_Sᵀν = s}``, accepted when ``‖Aᵀν‖∞ ≤ 1 + cert_tol``. A certificate bounds the relative
-duality gap by ``cert_tol``; the polished solution is exact up to round-off.
+``{ν : A_Sᵀν = s}`` or the minimum-norm ``ν`` with ``A_Sᵀν = s``, accepted when
+``‖Aᵀν‖∞ ≤ 1 + cert_tol``. A certificate bounds the relative duality gap by ``cert_tol``; the
+polished solution is exact up to round-off. Supports that fail the certificate are repaired
+(expansion and pruning, :func:`kinred.recovery._polish.polish_with_repair`).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 
+from .._parallel import get_num_threads, run_parallel
 from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
-from ..dynamics._threads import get_num_threads, run_parallel
-from ._kernels import admm_step, support_solve
+from ._kernels import admm_step
+from ._polish import polish_with_repair
 
 __all__ = [
     "RecoveryResult",
@@ -234,142 +243,72 @@ def _check_param(value, n: int, name: str) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# the certified polish
+# options
 
 
-def _polish(An, AtA, Yh, signs, form, param, nu0, nonneg, cert_tol, feas_tol):
-    """Exact KKT point on the support given by ``signs`` and its dual certificate.
+#: Spectral norm ``ω`` of the normalized matrix ``Â``: weighs the constraint ``v = Âz``
+#: against ``u = z``.
+_OMEGA = 10.0
+#: Starting penalty ``μ = ω²/(κ ‖Âᵀŷ‖∞)`` per column.
+_KAPPA = 0.1
 
-    Parameters (normalized problem, rows = problems)
-    ----------
-    An : (m, d) normalized matrix; AtA : (d, d) its Gram matrix ``ÂᵀÂ``.
-    Yh : (n, m); signs : (n, d) int8 in {-1, 0, 1}; param : (n,) η or λ;
-    nu0 : (n, m) approximate dual vector (basis pursuit only) or None.
 
-    Returns
-    -------
-    z : (n, d) polished points (zeros where the polish was impossible),
-    ok : (n,) certified, feasible : (n,) polished point feasible with the right signs,
-    gap : (n,) relative duality gap of the certificate,
-    dual : (n, d) where the polished point is feasible, the candidate certificate ``Âᵀν``;
-    where it is not (the least-squares residual ``r₀`` on ``S`` exceeds ``η``), ``Âᵀr₀``
-    scaled so that its largest entry off ``S`` is 1 (zeros where the polish was impossible).
-    """
-    n, d = signs.shape
-    m = An.shape[0]
-    z = np.zeros((n, d))
-    ok = np.zeros(n, dtype=bool)
-    feas = np.zeros(n, dtype=bool)
-    gap = np.full(n, np.nan)
-    dual = np.zeros((n, d))
-    if n == 0:
-        return z, ok, feas, gap, dual
-    counts = np.count_nonzero(signs, axis=1)
-    usable = np.flatnonzero((counts > 0) & (counts <= m))
-    if usable.size == 0:
-        return z, ok, feas, gap, dual
-    rows_all = usable[np.argsort(counts[usable], kind="stable")]  # similar sizes together
-    bp = form == "bpdn" and nu0 is not None
-    chunk = 512
-    for start in range(0, rows_all.size, chunk):
-        rows = rows_all[start : start + chunk]
-        sg = signs[rows]
-        cnt = counts[rows]
-        nb = rows.size
-        kmax = int(cnt.max())
-        idx = np.argsort(sg == 0, axis=1, kind="stable")[:, :kmax]  # support first
-        mask = np.arange(kmax)[None, :] < cnt[:, None]
-        s = np.take_along_axis(sg, idx, axis=1).astype(float) * mask
-        y = Yh[rows]
-        rhs = [np.take_along_axis(y @ An, idx, axis=1) * mask, s]
-        if bp:
-            nu = nu0[rows]
-            rhs.append(np.take_along_axis(nu @ An, idx, axis=1) * mask)
-        rhs = np.stack(rhs, axis=2)
-        sol, solved = support_solve(AtA, idx, cnt, rhs)
-        for t in np.flatnonzero(~solved):  # numerically singular Gram matrix: least squares
-            sup = idx[t, : cnt[t]]
-            sol[t, : cnt[t]] = np.linalg.lstsq(AtA[np.ix_(sup, sup)], rhs[t, : cnt[t]], rcond=None)[0]
+@dataclass(frozen=True)
+class _Options:
+    """Validated solver options (see :func:`basis_pursuit`)."""
 
-        def full(x):
-            out = np.zeros((nb, d))
-            np.put_along_axis(out, idx, x, axis=1)
-            return out
+    nonneg: bool
+    tol: float
+    max_iter: int
+    polish: bool
+    relax: float
+    check_every: int
+    cert_tol: float
+    mu0: float | None
+    adaptive: bool
 
-        g1, g2 = full(sol[:, :, 0]), full(sol[:, :, 1])
-        r0 = y - g1 @ An.T
-        w = g2 @ An.T
-        p = param[rows]
-        r0n = np.linalg.norm(r0, axis=1)
-        if form == "lasso":
-            lam = p
-            good = np.ones(nb, dtype=bool)
-        elif bp:  # basis pursuit: the polished point must interpolate
-            lam = np.zeros(nb)
-            good = r0n <= feas_tol
-        else:
-            wn = np.linalg.norm(w, axis=1)
-            good = (r0n <= p) & (wn > 0)
-            lam = np.sqrt(np.maximum(p * p - r0n * r0n, 0.0)) / np.where(wn > 0, wn, 1.0)
-        zS = g1 - lam[:, None] * g2
-        r = r0 + lam[:, None] * w
-        sign_ok = np.all((np.take_along_axis(zS, idx, axis=1) * s > 0) | ~mask, axis=1)
-        if bp:
-            nu = nu + (g2 - full(sol[:, :, 2])) @ An.T
-        else:
-            nu = r / np.where(lam > 0, lam, 1.0)[:, None]
-        c = nu @ An  # (nb, d) = (Âᵀν)ᵀ
-        viol = (np.max(c, axis=1) if nonneg else np.max(np.abs(c), axis=1)) - 1.0
-        if bp:
-            # second candidate: the minimum-norm ν with Â_Sᵀν = s, i.e. w = Â_S(Â_SᵀÂ_S)⁻¹s
-            # (the classical certificate of exact recovery); keep the less violated one
-            c2 = w @ An
-            viol2 = (np.max(c2, axis=1) if nonneg else np.max(np.abs(c2), axis=1)) - 1.0
-            pick = viol2 < viol
-            nu[pick], c[pick], viol[pick] = w[pick], c2[pick], viol2[pick]
-        l1 = np.sum(np.abs(zS), axis=1)
-        # relative duality gap of the dual-feasible point ν / max(1, ‖Âᵀν‖∞)
-        sc = np.maximum(1.0, viol + 1.0)
-        if form == "lasso":
-            primal = 0.5 * np.sum(r * r, axis=1) + lam * l1
-            tl = lam[:, None] * nu / sc[:, None]
-            dual_obj = np.sum(tl * y, axis=1) - 0.5 * np.sum(tl * tl, axis=1)
-        else:
-            primal = l1
-            dual_obj = (np.sum(nu * y, axis=1) - p * np.linalg.norm(nu, axis=1)) / sc
-        g = np.maximum(primal - dual_obj, 0.0) / np.maximum(np.abs(primal), 1e-300)
-        cert = good & sign_ok & (viol <= cert_tol) & (g <= 10 * cert_tol + 1e-12)
-        z[rows] = zS
-        ok[rows] = cert
-        feas[rows] = good & sign_ok
-        gap[rows] = g
-        # where the least-squares point on S does not reach the constraint (r₀ too large),
-        # the residual's correlations Âᵀr₀ point to the missing columns; else the certificate
-        miss = ~good
-        if np.any(miss):
-            corr = r0[miss] @ An
-            off = np.where(sg[miss] == 0, corr if nonneg else np.abs(corr), 0.0)
-            c[miss] = corr / np.maximum(np.max(off, axis=1), 1e-300)[:, None]
-        dual[rows] = c
-    return z, ok, feas, gap, dual
+    @classmethod
+    def validated(cls, *, nonneg, tol, max_iter, polish, relax, check_every, cert_tol, mu0,
+                  adaptive) -> "_Options":
+        tol = as_float(tol, "tol", low=0.0, low_open=True, high=1.0)
+        max_iter = as_int(max_iter, "max_iter", low=1)
+        relax = as_float(relax, "relax", low=0.0, low_open=True, high=2.0, high_open=True)
+        check_every = as_int(check_every, "check_every", low=1)
+        cert_tol = as_float(cert_tol, "cert_tol", low=0.0)
+        if mu0 is not None:
+            mu0 = as_float(mu0, "mu0", low=0.0, low_open=True)
+        return cls(nonneg=bool(nonneg), tol=tol, max_iter=max_iter, polish=bool(polish),
+                   relax=relax, check_every=check_every, cert_tol=cert_tol, mu0=mu0,
+                   adaptive=bool(adaptive))
+
+
+def _validated_solve(form: str, A, Y, param, param_name: str, **options) -> RecoveryResult:
+    """The body of :func:`basis_pursuit` (``form="bpdn"``) and :func:`lasso`: validate
+    everything, then solve."""
+    A = _check_A(A)
+    Y = _check_Y(Y, A.shape[0])
+    param = _check_param(param, Y.shape[1], param_name)
+    return _solve(A, Y, param, form, _Options.validated(**options))
 
 
 # ---------------------------------------------------------------------------------------------
-# the solver
+# phase 1: spectral data of A, and the columns that need no iteration
 
 
-def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg, tol, max_iter, polish, relax, check_every, cert_tol, mu0):
-    t0 = time.perf_counter()
+@dataclass(frozen=True)
+class _Spectrum:
+    """Spectral data of ``A (m, d)``."""
+
+    scale: float        # ‖A‖₂ (0 for A = 0)
+    U: np.ndarray       # left singular vectors, by decreasing singular value
+    rank: int           # numerical rank
+    An: np.ndarray      # Â = A ω/‖A‖ (A itself if A = 0)
+
+
+def _spectrum(A) -> _Spectrum:
+    """Singular values and left singular vectors of ``A``, its rank and ``Â``."""
     m, d = A.shape
-    n = Y.shape[1]
-    Z = np.zeros((d, n))
-    status = np.full(n, "max_iter", dtype="<U10")
-    iters = np.zeros(n, dtype=np.int64)
-    gap = np.full(n, np.nan)
-    pres = np.full(n, np.nan)
-    dres = np.full(n, np.nan)
-
-    # spectral data from the m×m Gram matrix (cheaper than an SVD of A when m ≤ d)
+    # from the m×m Gram matrix (cheaper than an SVD of A when m ≤ d)
     if m <= d:
         ev, U = np.linalg.eigh(A @ A.T)
         ev, U = ev[::-1], U[:, ::-1]
@@ -377,215 +316,144 @@ def _solve(A, Y, param, form, *, weight=10.0, adaptive=False, kappa=0.1, nonneg,
     else:
         U, sv, _ = np.linalg.svd(A, full_matrices=False)
     scale = float(sv[0]) if sv.size else 0.0
-    ynorm = np.linalg.norm(Y, axis=0)
     if scale == 0.0:
-        An = A
-        rank = 0
-    else:
-        An = A * (weight / scale)
-        # eigenvalues of AAᵀ carry round-off of size eps·‖A‖², i.e. singular values ~sqrt(eps)
-        rank = int(np.sum(sv > scale * max(m, d) * np.sqrt(np.finfo(float).eps)))
+        return _Spectrum(scale, U, 0, A)
+    # eigenvalues of AAᵀ carry round-off of size eps·‖A‖², i.e. singular values ~sqrt(eps)
+    rank = int(np.sum(sv > scale * max(m, d) * np.sqrt(np.finfo(float).eps)))
+    return _Spectrum(scale, U, rank, A * (_OMEGA / scale))
 
-    # trivial columns ---------------------------------------------------------------------
-    if form == "bpdn":
-        zero = ynorm <= param
-        Ur = U[:, :rank]
-        ls_res = np.linalg.norm(Y - Ur @ (Ur.T @ Y), axis=0)
-        infeasible = (~zero) & (ls_res > param + 1e-10 * ynorm)
-    else:
-        zero = np.max(np.abs(A.T @ Y), axis=0, initial=0.0) <= param
-        infeasible = np.zeros(n, dtype=bool)
-    status[zero] = "zero"
-    gap[zero] = 0.0
-    status[infeasible] = "infeasible"
-    Z[:, infeasible] = np.nan
-    active = np.flatnonzero(~zero & ~infeasible)
 
-    if active.size:
-        # normalized problem: Â = A/‖A‖, ŷ = y/‖y‖, η̂ = η/‖y‖, λ̂ = λ/(‖A‖‖y‖); z = ẑ ‖y‖/‖A‖
-        yn = ynorm[active]
-        Yh = np.ascontiguousarray((Y[:, active] / yn).T)  # (na, m)
-        # the weight ω (‖Â‖ = ω) balances the two ADMM constraints u = z and v = Âz
-        ph = param[active] / yn if form == "bpdn" else param[active] * weight / (scale * yn)
-        AtA = An.T @ An  # (d, d), for the polish
-        # rotated m-space: ÂÂᵀ = U diag(σ²) Uᵀ. With B = UᵀÂ and b̃ = Uᵀb the z-update is
-        # w̃ = (b̃ − B a)/(1 + σ²), z = a + Bᵀw̃, Uᵀ(Âz) = b̃ − w̃: two (m, d) products and no
-        # m×m one; the v-step (a ball around ŷ, or the LASSO average) commutes with U.
-        sig2, U = np.linalg.eigh(An @ An.T)
-        Dg = 1.0 / (1.0 + np.maximum(sig2, 0.0))
-        B = np.ascontiguousarray(U.T @ An)    # (m, d)
-        BT = np.ascontiguousarray(B.T)        # (d, m)
-        Yr = np.ascontiguousarray(Yh @ U)     # rotated right-hand sides (rows)
-        na = active.size
-        ids = active.copy()
-        u = np.zeros((na, d))
-        v = np.zeros((na, m))
-        p = np.zeros((na, d))
-        q = np.zeros((na, m))
-        a = np.zeros((na, d))  # u − p
-        b = np.zeros((na, m))  # v − q
-        c0 = np.max(np.abs(Yh @ An), axis=1)  # ‖Âᵀŷ‖∞
-        if mu0 is None:
-            mu = weight**2 / (kappa * c0)
-        else:
-            mu = np.full(na, float(mu0))
-        prev_signs = np.zeros((na, d), dtype=np.int8)
-        fails = np.zeros(na, dtype=np.int64)  # failed polish attempts: back off 2^fails checks
-        next_try = np.zeros(na, dtype=np.int64)
-        n_check = 0
-        adapt_until = max(20 * check_every, 300) if adaptive else 0
-        sq_dm = np.sqrt(d + m)
-        lasso_form = form == "lasso"
-        it_done = 0
-        while ids.size and it_done < max_iter:
-            steps = min(check_every, max_iter - it_done)
-            thr = 1.0 / mu
-            nrow = ids.size
-            # per row: primal residual, ‖Δu + ΔvB‖ (dual residual / μ), ‖(z, Âz)‖, ‖(u, v)‖,
-            # ‖p + qB‖ – computed by each chunk while its arrays are in cache
-            norms = np.empty((5, nrow))
-
-            def run(sl, steps=steps, thr=thr):
-                # `steps` iterations on the rows `sl` (independent problems), in cache
-                nr = sl.stop - sl.start
-                a_, b_, u_, v_, p_, q_ = a[sl], b[sl], u[sl], v[sl], p[sl], q[sl]
-                z_, w_, Az_ = np.empty((nr, d)), np.empty((nr, m)), np.empty((nr, m))
-                for j in range(steps):
-                    np.matmul(a_, BT, out=w_)
-                    np.subtract(b_, w_, out=w_)
-                    w_ *= Dg                     # w̃ = (b̃ − B a)/(1 + σ²)
-                    np.matmul(w_, B, out=z_)
-                    z_ += a_                     # z = a + Bᵀw̃
-                    np.subtract(b_, w_, out=Az_)  # Uᵀ Â z
-                    if j == steps - 1:
-                        u_old, v_old = u_.copy(), v_.copy()
-                    admm_step(z_, Az_, u_, v_, p_, q_, a_, b_, thr[sl], Yr[sl], ph[sl],
-                              relax, lasso_form, nonneg)
-                # residuals (Boyd et al. 2011, §3.3), rotation-invariant norms
-                nb = norms[:, sl]
-                nb[2] = np.sqrt(np.einsum("ij,ij->i", z_, z_) + np.einsum("ij,ij->i", Az_, Az_))
-                z_ -= u_
-                Az_ -= v_
-                nb[0] = np.sqrt(np.einsum("ij,ij->i", z_, z_) + np.einsum("ij,ij->i", Az_, Az_))
-                nb[3] = np.sqrt(np.einsum("ij,ij->i", u_, u_) + np.einsum("ij,ij->i", v_, v_))
-                np.subtract(v_, v_old, out=v_old)
-                np.matmul(v_old, B, out=z_)      # Δv B
-                z_ += u_
-                z_ -= u_old                       # Δu + Δv B
-                nb[1] = np.sqrt(np.einsum("ij,ij->i", z_, z_))
-                np.matmul(q_, B, out=z_)
-                z_ += p_
-                nb[4] = np.sqrt(np.einsum("ij,ij->i", z_, z_))
-
-            _run_chunks(run, nrow)
-            it_done += steps
-            r, ds, nBz, nx = norms[0], mu * norms[1], norms[2], norms[3]
-            eps_p = tol * (sq_dm * 1e-2 + np.maximum(nBz, nx))
-            eps_d = tol * (np.sqrt(d) * 1e-2 + mu * norms[4])
-            conv = (r <= eps_p) & (ds <= eps_d)
-            done = conv.copy()
-            final_z = u.copy()
-            cert_ok = np.zeros(ids.size, dtype=bool)
-            gp = np.full(ids.size, np.nan)
-            signs = np.sign(u).astype(np.int8)
-            if polish:
-                stable = (np.all(signs == prev_signs, axis=1) & (next_try <= n_check)) | conv
-                cand = np.flatnonzero(stable & np.any(signs != 0, axis=1))
-                if cand.size:
-                    nu0 = -mu[cand, None] * (q[cand] @ U.T) if (form == "bpdn") else None
-                    if form == "bpdn" and np.all(ph[cand] > 0):
-                        nu0 = None
-                    zc, okc, feasc, gc = _polish_split(
-                        An, AtA, Yh[cand], signs[cand], form, ph[cand], nu0, nonneg, cert_tol,
-                        conv[cand],
-                    )
-                    cert_ok[cand] = okc
-                    bad = cand[~okc]
-                    fails[bad] += 1
-                    next_try[bad] = n_check + 2 ** np.minimum(fails[bad], 6)
-                    gp[cand] = gc
-                    final_z[cand[okc]] = zc[okc]
-                    # converged but not certified: keep the polished point if feasible, no worse
-                    keep = np.flatnonzero(conv[cand] & ~okc & feasc)
-                    if keep.size and form == "bpdn":
-                        kk = cand[keep]
-                        # u is feasible only to the tolerance: allow its ℓ1 to be lower by as much
-                        better = (np.sum(np.abs(zc[keep]), axis=1)
-                                  <= (1.0 + 10.0 * tol) * np.sum(np.abs(u[kk]), axis=1))
-                        final_z[kk[better]] = zc[keep[better]]
-                done |= cert_ok
-            prev_signs = signs
-            n_check += 1
-            # residual balancing (Wohlberg 2017): only early, so that ADMM still converges
-            if it_done <= adapt_until:
-                ratio = (r / eps_p) / np.maximum(ds / eps_d, 1e-300)
-                fac = np.ones(ids.size)
-                fac[ratio > 10.0] = 2.0
-                fac[ratio < 0.1] = 0.5
-                if np.any(fac != 1.0):
-                    mu = mu * fac
-                    p /= fac[:, None]
-                    q /= fac[:, None]
-                    a = u - p
-                    b = v - q
-            if np.any(done) or it_done >= max_iter:
-                fin = done | (it_done >= max_iter)
-                cols = ids[fin]
-                Z[:, cols] = (final_z[fin] * (yn[np.searchsorted(active, cols)] * weight / scale)[:, None]).T
-                status[cols] = np.where(cert_ok[fin], "optimal", np.where(conv[fin], "converged", "max_iter"))
-                iters[cols] = it_done
-                gap[cols] = np.where(cert_ok[fin], gp[fin], np.nan)
-                pres[cols] = r[fin] / np.maximum(eps_p[fin] / tol, 1e-300)
-                dres[cols] = ds[fin] / np.maximum(eps_d[fin] / tol, 1e-300)
-                keep = ~fin
-                ids = ids[keep]
-                u, v, p, q, mu = u[keep], v[keep], p[keep], q[keep], mu[keep]
-                a, b = a[keep], b[keep]
-                Yh, Yr, ph, prev_signs = Yh[keep], Yr[keep], ph[keep], prev_signs[keep]
-                fails, next_try = fails[keep], next_try[keep]
-
-    # final quantities in the original scaling ---------------------------------------------
-    fin = ~infeasible
-    R = A @ np.where(np.isfinite(Z), Z, 0.0) - Y
-    residual = np.linalg.norm(R, axis=0)
-    residual[infeasible] = np.nan
-    l1 = np.sum(np.abs(Z), axis=0)
+def _trivial_columns(A, Y, param, form, spec: _Spectrum, ynorm):
+    """``(zero, infeasible)`` column masks: ``z = 0`` is optimal (``‖y‖ ≤ η``, or
+    ``‖Aᵀy‖∞ ≤ λ``), or ``min_z ‖Az − y‖ > η`` (BPDN)."""
     if form == "lasso":
-        objective = 0.5 * residual**2 + param * l1
+        zero = np.max(np.abs(A.T @ Y), axis=0, initial=0.0) <= param
+        return zero, np.zeros(Y.shape[1], dtype=bool)
+    zero = ynorm <= param
+    Ur = spec.U[:, : spec.rank]
+    ls_res = np.linalg.norm(Y - Ur @ (Ur.T @ Y), axis=0)
+    return zero, (~zero) & (ls_res > param + 1e-10 * ynorm)
+
+
+class _Columns:
+    """Per-column results in the caller's column order, filled in as columns finish."""
+
+    def __init__(self, d: int, n: int):
+        self.Z = np.zeros((d, n))
+        self.status = np.full(n, "max_iter", dtype="<U10")
+        self.iterations = np.zeros(n, dtype=np.int64)
+        self.gap = np.full(n, np.nan)
+        self.primal = np.full(n, np.nan)
+        self.dual = np.full(n, np.nan)
+
+    def mark_trivial(self, zero, infeasible) -> None:
+        self.status[zero] = "zero"
+        self.gap[zero] = 0.0
+        self.status[infeasible] = "infeasible"
+        self.Z[:, infeasible] = np.nan
+
+
+# ---------------------------------------------------------------------------------------------
+# phase 2: the normalized problem and the batch of columns being iterated
+
+
+@dataclass(frozen=True)
+class _System:
+    """The normalized matrix and what the iterations and the polish need of it.
+
+    ``ÂÂᵀ = U diag(σ²) Uᵀ``; the iterations run in rotated ``m``-coordinates with
+    ``B = UᵀÂ`` (see the module docstring).
+    """
+
+    An: np.ndarray      # (m, d) Â
+    AtA: np.ndarray     # (d, d) ÂᵀÂ, for the polish
+    U: np.ndarray       # (m, m) eigenvectors of ÂÂᵀ
+    Dg: np.ndarray      # (m,) 1/(1 + σ²)
+    B: np.ndarray       # (m, d) UᵀÂ
+    BT: np.ndarray      # (d, m) its transpose, contiguous
+
+    @property
+    def shape(self):
+        return self.An.shape
+
+
+@dataclass
+class _Batch:
+    """The columns still iterating, one row each: ADMM state and per-column data.
+
+    Every attribute is an array with one row per column; :meth:`compact` keeps the same rows
+    of all of them at once.
+    """
+
+    ids: np.ndarray         # (n,) column of Y
+    back: np.ndarray        # (n,) ‖y‖ω/‖A‖: z = ẑ·back
+    Yh: np.ndarray          # (n, m) ŷ
+    Yr: np.ndarray          # (n, m) Uᵀŷ
+    ph: np.ndarray          # (n,) η̂ or λ̂
+    mu: np.ndarray          # (n,) penalty μ
+    u: np.ndarray           # (n, d) ADMM iterates u, v and scaled duals p, q
+    v: np.ndarray           # (n, m)   (v, q in rotated coordinates)
+    p: np.ndarray           # (n, d)
+    q: np.ndarray           # (n, m)
+    a: np.ndarray           # (n, d) u − p
+    b: np.ndarray           # (n, m) v − q
+    prev_signs: np.ndarray  # (n, d) int8 sign pattern of u at the previous check
+    fails: np.ndarray       # (n,) failed polish attempts (back off 2^fails checks)
+    next_try: np.ndarray    # (n,) check at which the polish is tried again
+
+    @property
+    def size(self) -> int:
+        return int(self.ids.size)
+
+    def compact(self, keep) -> None:
+        """Keep the rows ``keep`` (mask or index) of every per-column array."""
+        for f in fields(self):
+            setattr(self, f.name, getattr(self, f.name)[keep])
+
+
+def _start(Y, param, form, spec: _Spectrum, active, ynorm, mu0):
+    """The normalized problem of the ``active`` columns: ``Â = A/‖A‖`` (times ``ω``),
+    ``ŷ = y/‖y‖``, ``η̂ = η/‖y‖``, ``λ̂ = λω/(‖A‖‖y‖)``; solutions ``z = ẑ ‖y‖ω/‖A‖``."""
+    An = spec.An
+    m, d = An.shape
+    yn = ynorm[active]
+    Yh = np.ascontiguousarray((Y[:, active] / yn).T)  # (na, m)
+    ph = param[active] / yn if form == "bpdn" else param[active] * _OMEGA / (spec.scale * yn)
+    AtA = An.T @ An
+    sig2, U = np.linalg.eigh(An @ An.T)
+    Dg = 1.0 / (1.0 + np.maximum(sig2, 0.0))
+    B = np.ascontiguousarray(U.T @ An)
+    system = _System(An=An, AtA=AtA, U=U, Dg=Dg, B=B, BT=np.ascontiguousarray(B.T))
+    Yr = np.ascontiguousarray(Yh @ U)     # rotated right-hand sides (rows)
+    na = active.size
+    if mu0 is None:
+        mu = _OMEGA**2 / (_KAPPA * np.max(np.abs(Yh @ An), axis=1))   # ‖Âᵀŷ‖∞
     else:
-        objective = np.where(fin, l1, np.nan)
-    return RecoveryResult(
-        Z=Z,
-        status=status,
-        iterations=iters,
-        residual=residual,
-        objective=objective,
-        param=param,
-        gap=gap,
-        primal_residual=pres,
-        dual_residual=dres,
-        form=form,
-        nonneg=bool(nonneg),
-        tol=float(tol),
-        seconds=time.perf_counter() - t0,
+        mu = np.full(na, float(mu0))
+    batch = _Batch(
+        ids=active.copy(), back=yn * _OMEGA / spec.scale, Yh=Yh, Yr=Yr, ph=ph, mu=mu,
+        u=np.zeros((na, d)), v=np.zeros((na, m)), p=np.zeros((na, d)), q=np.zeros((na, m)),
+        a=np.zeros((na, d)), b=np.zeros((na, m)), prev_signs=np.zeros((na, d), dtype=np.int8),
+        fails=np.zeros(na, dtype=np.int64), next_try=np.zeros(na, dtype=np.int64),
     )
+    return system, batch
 
 
-#: Expansion threshold of the polish repair (see :func:`_polish_split`).
-_GROW_DELTA = 0.05
+# ---------------------------------------------------------------------------------------------
+# phase 3: the sweep (iterations, checks, polish, balancing, retirement)
 
 
 #: Rows per chunk of the ADMM iterations: every chunk runs ``check_every`` iterations with its
 #: arrays in cache (a whole batch of 10⁴ rows streams ≈ 80 MB per iteration through memory),
-#: and the engine's threads (:func:`kinred.dynamics.set_num_threads`, one inside ensemble
-#: members) take the chunks, BLAS one thread each; the numba step releases the GIL.
+#: and the threads of :func:`kinred.dynamics.set_num_threads` (one inside ensemble members)
+#: take the chunks, BLAS one thread each; the numba step releases the GIL.
 _CHUNK_ROWS = 128
 
 
 def _run_chunks(run, nrow: int) -> None:
-    """Call ``run(slice)`` on row chunks of ``[0, nrow)``, dealt round-robin to the engine's
-    threads (rows are independent problems: the results do not depend on the split or the
-    number of threads, bit for bit, as a test checks)."""
+    """Call ``run(slice)`` on row chunks of ``[0, nrow)``, dealt round-robin to the threads
+    (rows are independent problems: the results do not depend on the split or the number of
+    threads, bit for bit, as a test checks)."""
     nchunks = -(-nrow // _CHUNK_ROWS)
     nthreads = min(get_num_threads(), nchunks)
     bounds = [nrow * i // nchunks for i in range(nchunks + 1)]
@@ -599,89 +467,220 @@ def _run_chunks(run, nrow: int) -> None:
                  [slices[g::nthreads] for g in range(nthreads)])
 
 
-def _polish_split(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol, expand=None):
-    """Polish columns on the ADMM support, repairing it where the certificate fails.
+def _rownorm(x, y=None):
+    """Euclidean norms of the rows of ``x`` (of ``[x, y]`` if ``y`` is given)."""
+    s = np.einsum("ij,ij->i", x, x)
+    return np.sqrt(s if y is None else s + np.einsum("ij,ij->i", y, y))
 
-    Two repairs, each followed by a new polish of the columns it changes:
 
-    1. *expansion*: indices outside the support whose lead (see :func:`_polish`) satisfies
-       ``|lead_j| ≥ 1 − δ`` (``δ = 0.05``, at most 8, the largest) join it with the sign of
-       ``lead_j``. For a feasible polish the lead is the candidate certificate ``Âᵀν`` (the KKT
-       conditions put every support index at ``|(Âᵀν)_j| = 1``); for an infeasible one it is
-       the correlation ``Âᵀr₀`` of the least-squares residual (an orthogonal-matching-pursuit
-       step: with one coefficient ``x_j`` missing, ``r₀ = x_j P⊥a_j``). This recovers
-       coefficients that ADMM's soft threshold has not yet released, e.g. a true entry of
-       relative size 1e-5 (measured: 15 of the benchmark's 10⁴ problems; ADMM alone needs
-       2000–4000 more iterations). An index added in error gets a polished coefficient of
-       about zero and is removed by
-    2. *pruning*: entries whose polished sign disagrees with the support's, or whose size is
-       below ``1e-10`` of the largest, are removed.
+def _iterate_rows(system: _System, batch: _Batch, sl, steps, thr, norms, relax, lasso_form,
+                  nonneg):
+    """``steps`` ADMM iterations on the rows ``sl`` (independent problems, in cache), then
+    their residual norms into ``norms[:, sl]``: primal residual, ``‖Δu + ΔvB‖`` (dual
+    residual / μ), ``‖(z, Âz)‖``, ``‖(u, v)‖``, ``‖p + qB‖`` (Boyd et al. 2011, §3.3;
+    rotation-invariant)."""
+    B, BT, Dg = system.B, system.BT, system.Dg
+    m, d = system.shape
+    nr = sl.stop - sl.start
+    a_, b_, u_, v_ = batch.a[sl], batch.b[sl], batch.u[sl], batch.v[sl]
+    p_, q_ = batch.p[sl], batch.q[sl]
+    z_, w_, Az_ = np.empty((nr, d)), np.empty((nr, m)), np.empty((nr, m))
+    for j in range(steps):
+        np.matmul(a_, BT, out=w_)
+        np.subtract(b_, w_, out=w_)
+        w_ *= Dg                     # w̃ = (b̃ − B a)/(1 + σ²)
+        np.matmul(w_, B, out=z_)
+        z_ += a_                     # z = a + Bᵀw̃
+        np.subtract(b_, w_, out=Az_)  # Uᵀ Â z
+        if j == steps - 1:
+            u_old, v_old = u_.copy(), v_.copy()
+        admm_step(z_, Az_, u_, v_, p_, q_, a_, b_, thr[sl], batch.Yr[sl], batch.ph[sl],
+                  relax, lasso_form, nonneg)
+    nb = norms[:, sl]
+    nb[2] = _rownorm(z_, Az_)
+    z_ -= u_
+    Az_ -= v_
+    nb[0] = _rownorm(z_, Az_)
+    nb[3] = _rownorm(u_, v_)
+    np.subtract(v_, v_old, out=v_old)
+    np.matmul(v_old, B, out=z_)      # Δv B
+    z_ += u_
+    z_ -= u_old                       # Δu + Δv B
+    nb[1] = _rownorm(z_)
+    np.matmul(q_, B, out=z_)
+    z_ += p_
+    nb[4] = _rownorm(z_)
 
-    Each repair only proposes a support; acceptance is by the certificate as before. The
-    expansion is tried only on the rows flagged by ``expand`` (default all; the solver flags
-    the columns whose ADMM has converged: on the others ADMM is still moving its support).
+
+class _Check(NamedTuple):
+    """Residuals of one check, per row of the batch."""
+
+    r: np.ndarray        # primal residual
+    ds: np.ndarray       # dual residual
+    eps_p: np.ndarray    # primal tolerance
+    eps_d: np.ndarray    # dual tolerance
+    conv: np.ndarray     # both below their tolerance
+
+
+def _iterate(system: _System, batch: _Batch, steps: int, form: str, opts: _Options) -> _Check:
+    """``steps`` iterations on every row of the batch (chunks in threads); the residuals."""
+    m, d = system.shape
+    thr = 1.0 / batch.mu
+    norms = np.empty((5, batch.size))
+    _run_chunks(lambda sl: _iterate_rows(system, batch, sl, steps, thr, norms, opts.relax,
+                                         form == "lasso", opts.nonneg), batch.size)
+    tol = opts.tol
+    r, ds, nBz, nx = norms[0], batch.mu * norms[1], norms[2], norms[3]
+    eps_p = tol * (np.sqrt(d + m) * 1e-2 + np.maximum(nBz, nx))
+    eps_d = tol * (np.sqrt(d) * 1e-2 + batch.mu * norms[4])
+    return _Check(r, ds, eps_p, eps_d, (r <= eps_p) & (ds <= eps_d))
+
+
+class _Accepted(NamedTuple):
+    """What a check accepts, per row of the batch."""
+
+    z: np.ndarray          # the point to return if the row finishes now
+    certified: np.ndarray  # polished and certified
+    gap: np.ndarray        # certified relative duality gap (NaN where not polished)
+
+    @classmethod
+    def admm(cls, batch: _Batch) -> "_Accepted":
+        """The ADMM iterates ``u``, nothing certified."""
+        return cls(batch.u.copy(), np.zeros(batch.size, dtype=bool), np.full(batch.size, np.nan))
+
+
+def _polish_stable(system: _System, batch: _Batch, signs, conv, n_check, form, opts) -> _Accepted:
+    """Polish the rows whose sign pattern has not changed since the previous check (and is
+    not backed off after failed attempts), and the converged rows.
+
+    A failed attempt backs the row off ``2^fails`` checks (at most 64). A converged row that
+    is not certified keeps the polished point if it is feasible and (BPDN) its ℓ1 norm
+    exceeds ADMM's by at most the factor ``1 + 10·tol`` (``u`` is feasible only to the
+    tolerance).
     """
-    m = An.shape[0]
-    z, ok, feas, gap, dual = _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol)
-
-    def attempt(rows, new_signs):
-        """Polish ``rows`` on ``new_signs``; keep a result that is certified, or feasible
-        where the current one is not. Returns the raw polished points."""
-        res = _polish_split1(
-            An, AtA, Yh[rows], new_signs, form, ph[rows],
-            None if nu0 is None else nu0[rows], nonneg, cert_tol,
-        )
-        better = res[1] | (res[2] & ~feas[rows] & ~ok[rows])
-        rr = rows[better]
-        z[rr], ok[rr], feas[rr], gap[rr], dual[rr] = (x[better] for x in res)
-        return res[0]
-
-    # 1. expansion: off-support indices with |lead_j| ≥ 1 − δ, at most `top` (the largest)
-    base_z, base_signs = z.copy(), signs.copy()      # what the pruning starts from
-    off = np.where(signs == 0, dual if nonneg else np.abs(dual), -np.inf)
-    top = min(8, off.shape[1] - 1)
-    near = np.zeros(signs.shape, dtype=bool)
-    if top > 0:
-        part = np.argpartition(-off, top, axis=1)[:, :top]
-        np.put_along_axis(near, part,
-                          np.take_along_axis(off, part, axis=1) >= 1.0 - _GROW_DELTA, axis=1)
-    if expand is not None:
-        near &= np.asarray(expand, dtype=bool)[:, None]
-    grow = np.flatnonzero(~ok & np.any(near, axis=1)
-                          & (np.count_nonzero(signs, axis=1) + np.count_nonzero(near, axis=1) <= m))
-    if grow.size:
-        grown = np.where(near[grow], np.sign(dual[grow]).astype(np.int8), signs[grow])
-        base_z[grow] = attempt(grow, grown)
-        base_signs[grow] = grown
-    # 2. pruning: entries whose polished sign disagrees, or that came out negligibly small
-    big = np.abs(base_z) > 1e-10 * np.max(np.abs(base_z), axis=1, keepdims=True)
-    pruned = np.where((np.sign(base_z).astype(np.int8) == base_signs) & big, base_signs, np.int8(0))
-    retry = np.flatnonzero(~ok & np.any(pruned != base_signs, axis=1) & np.any(pruned != 0, axis=1))
-    if retry.size:
-        attempt(retry, pruned[retry])
-    return z, ok, feas, gap
+    acc = _Accepted.admm(batch)
+    stable = (np.all(signs == batch.prev_signs, axis=1) & (batch.next_try <= n_check)) | conv
+    cand = np.flatnonzero(stable & np.any(signs != 0, axis=1))
+    if not cand.size:
+        return acc
+    nu0 = None
+    if form == "bpdn" and not np.all(batch.ph[cand] > 0):      # basis-pursuit rows: ADMM's dual
+        nu0 = -batch.mu[cand, None] * (batch.q[cand] @ system.U.T)
+    pol = polish_with_repair(system.An, system.AtA, batch.Yh[cand], signs[cand], form,
+                             batch.ph[cand], nu0, opts.nonneg, opts.cert_tol, conv[cand])
+    acc.certified[cand] = pol.ok
+    bad = cand[~pol.ok]
+    batch.fails[bad] += 1
+    batch.next_try[bad] = n_check + 2 ** np.minimum(batch.fails[bad], 6)
+    acc.gap[cand] = pol.gap
+    acc.z[cand[pol.ok]] = pol.z[pol.ok]
+    keep = np.flatnonzero(conv[cand] & ~pol.ok & pol.feasible)
+    if keep.size and form == "bpdn":
+        kk = cand[keep]
+        better = (np.sum(np.abs(pol.z[keep]), axis=1)
+                  <= (1.0 + 10.0 * opts.tol) * np.sum(np.abs(batch.u[kk]), axis=1))
+        acc.z[kk[better]] = pol.z[keep[better]]
+    return acc
 
 
-def _polish_split1(An, AtA, Yh, signs, form, ph, nu0, nonneg, cert_tol):
-    """Polish columns, separating basis pursuit (η = 0) from BPDN (η > 0)."""
-    feas_tol = 1e-9
-    if form == "lasso" or nu0 is None:
-        return _polish(An, AtA, Yh, signs, form, ph, None, nonneg, cert_tol, feas_tol)
-    n, d = signs.shape
-    z = np.zeros((n, d))
-    ok = np.zeros(n, dtype=bool)
-    feas = np.zeros(n, dtype=bool)
-    gap = np.full(n, np.nan)
-    dual = np.zeros((n, d))
-    for sel, nu in ((ph == 0, nu0), (ph > 0, None)):
-        rows = np.flatnonzero(sel)
-        if rows.size:
-            res = _polish(
-                An, AtA, Yh[rows], signs[rows], form, ph[rows],
-                None if nu is None else nu[rows], nonneg, cert_tol, feas_tol,
-            )
-            z[rows], ok[rows], feas[rows], gap[rows], dual[rows] = res
-    return z, ok, feas, gap, dual
+def _balance(batch: _Batch, chk: _Check) -> None:
+    """Residual balancing (Wohlberg 2017): ``μ`` doubled (halved) where the relative primal
+    residual exceeds the relative dual one tenfold (or vice versa); the scaled duals follow."""
+    ratio = (chk.r / chk.eps_p) / np.maximum(chk.ds / chk.eps_d, 1e-300)
+    fac = np.ones(batch.size)
+    fac[ratio > 10.0] = 2.0
+    fac[ratio < 0.1] = 0.5
+    if np.any(fac != 1.0):
+        batch.mu = batch.mu * fac
+        batch.p /= fac[:, None]
+        batch.q /= fac[:, None]
+        batch.a = batch.u - batch.p
+        batch.b = batch.v - batch.q
+
+
+def _retire(out: _Columns, batch: _Batch, fin, acc: _Accepted, chk: _Check, it_done, tol) -> None:
+    """Write the rows ``fin`` into the results (original scaling) and drop them."""
+    cols = batch.ids[fin]
+    out.Z[:, cols] = (acc.z[fin] * batch.back[fin][:, None]).T
+    out.status[cols] = np.where(acc.certified[fin], "optimal",
+                                np.where(chk.conv[fin], "converged", "max_iter"))
+    out.iterations[cols] = it_done
+    out.gap[cols] = np.where(acc.certified[fin], acc.gap[fin], np.nan)
+    out.primal[cols] = chk.r[fin] / np.maximum(chk.eps_p[fin] / tol, 1e-300)
+    out.dual[cols] = chk.ds[fin] / np.maximum(chk.eps_d[fin] / tol, 1e-300)
+    batch.compact(~fin)
+
+
+def _sweep(system: _System, batch: _Batch, out: _Columns, form: str, opts: _Options) -> None:
+    """Iterate until every row is certified, converged or at ``max_iter``: every
+    ``check_every`` iterations check the residuals, polish, balance ``μ`` (``adaptive``, during
+    the first ``max(20·check_every, 300)`` iterations) and retire the finished rows."""
+    adapt_until = max(20 * opts.check_every, 300) if opts.adaptive else 0
+    n_check = 0
+    it_done = 0
+    while batch.size and it_done < opts.max_iter:
+        steps = min(opts.check_every, opts.max_iter - it_done)
+        chk = _iterate(system, batch, steps, form, opts)
+        it_done += steps
+        signs = np.sign(batch.u).astype(np.int8)
+        if opts.polish:
+            acc = _polish_stable(system, batch, signs, chk.conv, n_check, form, opts)
+        else:
+            acc = _Accepted.admm(batch)
+        done = chk.conv | acc.certified
+        batch.prev_signs = signs
+        n_check += 1
+        if it_done <= adapt_until:
+            _balance(batch, chk)
+        if np.any(done) or it_done >= opts.max_iter:
+            _retire(out, batch, done | (it_done >= opts.max_iter), acc, chk, it_done, opts.tol)
+
+
+# ---------------------------------------------------------------------------------------------
+# the solver: setup, trivial columns, sweep, finalize
+
+
+def _finalize(A, Y, param, form, opts: _Options, out: _Columns, infeasible, t0) -> RecoveryResult:
+    """Residuals and objectives in the original scaling."""
+    R = A @ np.where(np.isfinite(out.Z), out.Z, 0.0) - Y
+    residual = np.linalg.norm(R, axis=0)
+    residual[infeasible] = np.nan
+    l1 = np.sum(np.abs(out.Z), axis=0)
+    if form == "lasso":
+        objective = 0.5 * residual**2 + param * l1
+    else:
+        objective = np.where(~infeasible, l1, np.nan)
+    return RecoveryResult(
+        Z=out.Z,
+        status=out.status,
+        iterations=out.iterations,
+        residual=residual,
+        objective=objective,
+        param=param,
+        gap=out.gap,
+        primal_residual=out.primal,
+        dual_residual=out.dual,
+        form=form,
+        nonneg=opts.nonneg,
+        tol=float(opts.tol),
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _solve(A, Y, param, form: str, opts: _Options) -> RecoveryResult:
+    """Solve all columns of ``Y`` (validated inputs; ``form`` ``"bpdn"`` or ``"lasso"``)."""
+    t0 = time.perf_counter()
+    m, d = A.shape
+    out = _Columns(d, Y.shape[1])
+    spec = _spectrum(A)
+    ynorm = np.linalg.norm(Y, axis=0)
+    zero, infeasible = _trivial_columns(A, Y, param, form, spec, ynorm)
+    out.mark_trivial(zero, infeasible)
+    active = np.flatnonzero(~zero & ~infeasible)
+    if active.size:
+        system, batch = _start(Y, param, form, spec, active, ynorm, opts.mu0)
+        _sweep(system, batch, out, form, opts)
+    return _finalize(A, Y, param, form, opts, out, infeasible, t0)
 
 
 _COMMON_DOC = """
@@ -709,20 +708,9 @@ _COMMON_DOC = """
         ``max(20·check_every, 300)`` iterations, ``μ`` of a column is doubled (halved) when its
         relative primal residual exceeds its relative dual residual tenfold (or vice versa). No
         re-factorization is needed (``μ`` only scales the ``u``-threshold). Off by default: on
-        Gaussian compressed-sensing problems the scale-invariant starting ``μ`` converges 2–4×
-        faster than the balanced one (measured, see docs/recovery.md).
+        Gaussian compressed-sensing problems the scale-invariant starting ``μ`` converges
+        faster (docs/performance.md).
 """
-
-
-def _check_opts(tol, max_iter, relax, check_every, cert_tol, mu0):
-    tol = as_float(tol, "tol", low=0.0, low_open=True, high=1.0)
-    max_iter = as_int(max_iter, "max_iter", low=1)
-    relax = as_float(relax, "relax", low=0.0, low_open=True, high=2.0, high_open=True)
-    check_every = as_int(check_every, "check_every", low=1)
-    cert_tol = as_float(cert_tol, "cert_tol", low=0.0)
-    if mu0 is not None:
-        mu0 = as_float(mu0, "mu0", low=0.0, low_open=True)
-    return tol, max_iter, relax, check_every, cert_tol, mu0
 
 
 def basis_pursuit(
@@ -774,13 +762,9 @@ def basis_pursuit(
     >>> bool(np.allclose(res.Z, X, atol=1e-8)), res.counts()
     (True, {'optimal': 5})
     """
-    A = _check_A(A)
-    Y = _check_Y(Y, A.shape[0])
-    eta = _check_param(eta, Y.shape[1], "eta")
-    opts = _check_opts(tol, max_iter, relax, check_every, cert_tol, mu0)
-    return _solve(
-        A, Y, eta, "bpdn", nonneg=bool(nonneg), tol=opts[0], max_iter=opts[1], polish=bool(polish),
-        relax=opts[2], check_every=opts[3], cert_tol=opts[4], mu0=opts[5], adaptive=bool(adaptive),
+    return _validated_solve(
+        "bpdn", A, Y, eta, "eta", nonneg=nonneg, tol=tol, max_iter=max_iter, polish=polish,
+        relax=relax, check_every=check_every, cert_tol=cert_tol, mu0=mu0, adaptive=adaptive,
     )
 
 
@@ -827,13 +811,9 @@ def lasso(
     >>> np.round(res.Z[:, 0], 8) + 0.0
     array([2., 0., 0.])
     """
-    A = _check_A(A)
-    Y = _check_Y(Y, A.shape[0])
-    lam = _check_param(lam, Y.shape[1], "lam")
-    opts = _check_opts(tol, max_iter, relax, check_every, cert_tol, mu0)
-    return _solve(
-        A, Y, lam, "lasso", nonneg=bool(nonneg), tol=opts[0], max_iter=opts[1], polish=bool(polish),
-        relax=opts[2], check_every=opts[3], cert_tol=opts[4], mu0=opts[5], adaptive=bool(adaptive),
+    return _validated_solve(
+        "lasso", A, Y, lam, "lam", nonneg=nonneg, tol=tol, max_iter=max_iter, polish=polish,
+        relax=relax, check_every=check_every, cert_tol=cert_tol, mu0=mu0, adaptive=adaptive,
     )
 
 

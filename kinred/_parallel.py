@@ -1,4 +1,17 @@
-"""Thread control of the dynamics engine (engine threads and BLAS threads)."""
+"""Parallel regions shared by the dynamics engine and the recovery solver.
+
+* the thread count (:func:`set_num_threads`, :func:`get_num_threads`, :func:`num_threads`):
+  the row strips of one simulation (:mod:`kinred.dynamics`) and the row chunks of a batched
+  ℓ1 solve (:mod:`kinred.recovery`) run in that many threads; ensemble members use one;
+* :func:`run_parallel`: one parallel region (group 0 in the calling thread, the others in a
+  shared pool) with BLAS single-threaded until every group has finished;
+* :func:`blas_threads`: numpy's OpenBLAS thread count for the duration of a ``with`` block;
+* :func:`gemm`: ``C ← α·op(A)·op(B) + β·C`` in place on sub-blocks, by numpy's own
+  ``cblas_?gemm`` (:func:`cblas_gemm_symbol` also gives the compiled strip worker of
+  ``kinred.pairsum._kernels`` the symbol to link against).
+
+No numba here: the compiled callers live in the ``_kernels`` modules.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
-from .._validate import as_int
+from ._validate import as_int
 
 _STATE = {"n": max(1, min(os.cpu_count() or 1, 2)), "pool": None, "pool_n": 0}
 
@@ -46,11 +59,10 @@ def blas_threads(n: int):
     """Limit BLAS to ``n`` threads for the duration (if supported).
 
     In numpy's OpenBLAS, ``openblas_set_num_threads_local`` acts on the whole process, not
-    on the calling thread (measured: a value set in one thread is read back in another).
-    Only the thread that owns a parallel region may therefore enter this context
-    (:func:`run_parallel` does, for its workers). (Two workers each entering it raced: the first to
-    finish restored the old count while the other still computed, whose later BLAS calls
-    then ran multithreaded – oversubscribed, and round-off that changed from call to call.)
+    on the calling thread. Only the thread that owns a parallel region may therefore enter
+    this context (:func:`run_parallel` does, for its workers): a worker restoring the count
+    on its way out would switch the others' BLAS calls back to several threads mid-region
+    (see docs/performance.md, "Threads and BLAS").
     """
     if _BLAS_LOCAL is None:
         yield
@@ -64,7 +76,7 @@ def blas_threads(n: int):
 
 def run_parallel(fn, args: list) -> list:
     """``[fn(g, args[g]) for g in range(len(args))]`` in ``len(args)`` threads: group 0 in the
-    calling thread, the others in the engine's pool, with BLAS single-threaded for the whole
+    calling thread, the others in the shared pool, with BLAS single-threaded for the whole
     region. The caller owns the BLAS setting and restores it after every group has finished
     (numpy's OpenBLAS applies it process-wide, see :func:`blas_threads`); pool threads also
     set it for themselves, in case a BLAS keeps it per thread. Results in group order."""
@@ -87,11 +99,13 @@ def run_parallel(fn, args: list) -> list:
 
 
 def set_num_threads(n: int) -> None:
-    """Set the number of threads one simulation uses (row strips run in ``n`` threads).
+    """Set the number of threads of one simulation or one batched ℓ1 solve.
 
-    With ``n = 1`` a simulation is single-threaded, including BLAS calls made by the engine:
-    an ensemble can then run one simulation per core (:func:`kinred.ensemble.run_ensemble`
-    runs every member with one thread). The default is ``min(cpu_count, 2)``.
+    The row strips of the dynamics engine and the row chunks of
+    :func:`kinred.recovery.basis_pursuit` / :func:`~kinred.recovery.lasso` run in ``n``
+    threads. With ``n = 1`` they are single-threaded, including the BLAS calls they make: an
+    ensemble can then run one simulation per core (:func:`kinred.ensemble.run_ensemble` runs
+    every member with one thread). The default is ``min(cpu_count, 2)``.
 
     Examples
     --------
@@ -105,7 +119,7 @@ def set_num_threads(n: int) -> None:
 
 @contextlib.contextmanager
 def num_threads(n: int):
-    """Run the engine with ``n`` threads for the duration of the ``with`` block (then restore)."""
+    """Use ``n`` threads for the duration of the ``with`` block (then restore)."""
     prev = _STATE["n"]
     set_num_threads(n)
     try:
@@ -115,15 +129,16 @@ def num_threads(n: int):
 
 
 def get_num_threads() -> int:
-    """Number of threads of the engine (see :func:`set_num_threads`)."""
+    """Number of threads of a parallel region (see :func:`set_num_threads`)."""
     return _STATE["n"]
 
 
 def pool(n: int) -> ThreadPoolExecutor:
+    """The shared pool of ``n`` worker threads (made anew when ``n`` changes)."""
     if _STATE["pool"] is None or _STATE["pool_n"] != n:
         if _STATE["pool"] is not None:
             _STATE["pool"].shutdown(wait=False)
-        _STATE["pool"] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kinred-dyn")
+        _STATE["pool"] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="kinred-par")
         _STATE["pool_n"] = n
     return _STATE["pool"]
 
@@ -146,7 +161,7 @@ def _find_cblas_gemm(kind: str):
     """``cblas_?gemm`` (``kind`` = ``"d"`` or ``"s"``) of numpy's own OpenBLAS (ILP64
     ``scipy_cblas_dgemm64_``), or None.
 
-    Calling it directly lets the engine accumulate ``C += A·B`` in place (``beta = 1``) on
+    Calling it directly lets the dynamics engine accumulate ``C += A·B`` in place (``beta = 1``) on
     sub-blocks with arbitrary leading dimensions, which ``np.matmul`` cannot do; the same
     library (and thread setting) as numpy's ``@`` is used.
     """
