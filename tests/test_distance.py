@@ -599,3 +599,15 @@ def test_w1_refuses_to_materialize_a_huge_mixture_quantization(monkeypatch):
     monkeypatch.setattr(_inputs, "MAX_QUANTIZATION_ATOMS", qm.n_atoms - 1)
     with pytest.raises(TooLarge, match=rf"nu: the quantization has {qm.n_atoms} atoms"):
         w1(np.zeros((1, 2)), qm)
+
+
+def test_w1_uses_the_stored_atoms_of_atomic_and_1d_quantizations(monkeypatch):
+    from kinred.distance import _inputs
+    from kinred.quantize import quantize
+
+    monkeypatch.setattr(_inputs, "MAX_QUANTIZATION_ATOMS", 1)   # nothing is materialized
+    x = np.random.default_rng(0).random((30, 2))
+    qa = quantize(Atomic(x), eps=0.1)                             # AtomicQuantization
+    assert w1(qa, x + [0.3, 0.4]).value == pytest.approx(0.5, rel=1e-12)
+    q1 = quantize(Uniform(0, 1), atoms=8)                          # Quantization1D
+    assert w1(q1, Uniform(0, 1)).value == pytest.approx(1 / 32, rel=1e-12)

@@ -214,11 +214,16 @@ def normalize(obj, w, name: str, wname: str):
 
 
 def _from_quantization(q, name):
-    """The atoms of a quantization result: a tensor grid stays a product of its 1-D factors
-    (never enumerated here), every other kind is materialized up to
-    :data:`MAX_QUANTIZATION_ATOMS` atoms."""
-    from ..quantize import TensorQuantization
+    """The atoms of a quantization result: stored atoms as they are (1-D quantile atoms, an
+    atomic measure), a tensor grid as the product of its 1-D factors (never enumerated here),
+    every other kind materialized up to :data:`MAX_QUANTIZATION_ATOMS` atoms."""
+    from ..quantize import AtomicQuantization, Quantization1D, TensorQuantization
 
+    if isinstance(q, Quantization1D):
+        return Pts(np.ascontiguousarray(q.points, dtype=np.float64).reshape(-1, 1),
+                   np.asarray(q.weights, dtype=np.float64))
+    if isinstance(q, AtomicQuantization):
+        return _from_measure(q.measure, name, _measure_classes())
     if isinstance(q, TensorQuantization):
         factors = []
         for f in q.factors:
