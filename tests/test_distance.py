@@ -184,8 +184,8 @@ def test_tensor_products_continuous():
     T = TensorProduct([Uniform(0, 1), Uniform(0, 2), Uniform(-1, 1)])
     t = np.array([0.2, -0.5, 0.1])
     S = TensorProduct([Uniform(0 + t[0], 1 + t[0]), Uniform(t[1], 2 + t[1]), Uniform(-1 + t[2], 1 + t[2])])
-    r = w1(T, S)
-    assert r.method == "bracket" and "auto chose bracket" in r.note
+    r = w1(T, S, "bracket")
+    assert r.method == "bracket"
     assert r.lower == pytest.approx(np.linalg.norm(t), rel=1e-9)
     assert r.upper == pytest.approx(np.linalg.norm(t), rel=1e-9)
     assert w1(T, S, "product-l1").value == pytest.approx(np.abs(t).sum(), rel=1e-9)
@@ -195,7 +195,7 @@ def test_continuous_product_vs_atoms_bracket_is_consistent():
     T = TensorProduct([Uniform(0, 1), Uniform(0, 1)])
     rng = np.random.default_rng(5)
     y = rng.random((150, 2)) ** 2
-    r = w1(T, y, seed=0)
+    r = w1(T, y, "bracket", seed=0)
     assert r.method == "bracket" and not r.exact and r.n_atoms == (None, 150)
     # fine midpoint grid G (64x64): |W1(T, y) − W1(G, y)| ≤ W1(T, G) ≤ 2·1/(4·64)
     g = (2 * np.arange(1, 65) - 1) / 128
@@ -295,12 +295,47 @@ def test_auto_reports_method_and_exactness():
     x, y = rng.random((80, 3)), rng.random((70, 3))
     r = w1(x, y)
     assert r.method == "exact" and r.exact and r.note.startswith("auto chose exact")
-    r = w1(x, y, max_exact_pairs=100, leaf_size=20, dual_sample=30, seed=0)
-    assert r.method == "bracket" and r.note.startswith("auto chose bracket") and not r.exact
+    r = w1(x, y, "bracket", max_exact_pairs=100, leaf_size=20, dual_sample=30, seed=0)
+    assert r.method == "bracket" and not r.exact
     assert r.lower <= w1(x, y).value <= r.upper and r.n_atoms == (80, 70)
-    r = w1(x, y, max_exact_pairs=100, seed=0)   # a single exact leaf: the bounds meet
+    r = w1(x, y, "bracket", seed=0)   # a single exact leaf: the bounds meet
     assert r.exact and r.value == pytest.approx(w1(x, y).value, rel=1e-11)
     assert "bounds meet" in r.note
+
+
+def test_auto_is_exact_or_raises_never_a_silent_bracket():
+    """Issue 18: "auto" returned the midpoint of a wide bracket as its value (here 29 % off)."""
+    rng = np.random.default_rng(0)
+    x, y = rng.random((80, 3)), rng.random((70, 3))
+    exact = w1(x, y, "exact").value
+    br = w1(x, y, "bracket", leaf_size=20, dual_sample=30, seed=0)   # asked for: a bracket
+    assert br.lower <= exact <= br.upper and not br.exact
+    assert abs(br.value - exact) > 0.2 * exact                      # the midpoint is far off
+    with pytest.raises(TooLarge) as exc:                            # what "auto" returned
+        w1(x, y, max_exact_pairs=100, leaf_size=20, dual_sample=30, seed=0)
+    msg = str(exc.value)
+    for part in ("mu has 80 atoms and nu 70", "N·M = 5600", "max_exact_pairs = 100",
+                 "method='exact-lazy'", "memory O(N + M)", "roughly", "method='exact'",
+                 "max_exact_pairs >= 5600", "method='bracket'"):
+        assert part in msg, part
+    r = w1(x, y, max_exact_pairs=5600)                              # the limit raised: exact
+    assert r.exact and r.method == "exact" and r.value == exact
+    with pytest.raises(TooLarge, match="max_exact_pairs = 100"):    # l1, atoms, not products
+        w1(x, y, metric="l1", max_exact_pairs=100)
+
+
+def test_auto_on_continuous_laws_in_d_above_1_raises_with_the_alternatives():
+    T = TensorProduct([Uniform(0, 1), Uniform(0, 1)])
+    S = TensorProduct([Uniform(0.5, 1.5), Uniform(0, 1)])
+    with pytest.raises(InvalidInput, match=r"mu and nu are continuous laws in d = 2.*"
+                                           r"method='bracket'.*method='product-l1'"):
+        w1(T, S)
+    with pytest.raises(InvalidInput, match=r"mu is a continuous law in d = 2.*method='bracket'"
+                                           r"(?!.*product-l1).*kinred.quantize"):
+        w1(T, np.random.default_rng(0).random((10, 2)))
+    assert w1(T, S, "bracket").exact and w1(T, S, "bracket").value == pytest.approx(0.5, rel=1e-9)
+    assert w1(T, S, metric="l1").method == "product-l1"           # exact for the l1 cost
+    assert w1(Uniform(0, 1), Uniform(0.5, 1.5)).value == pytest.approx(0.5, rel=1e-12)  # d = 1
 
 
 # --------------------------------------------------------------------------- sliced
@@ -478,7 +513,7 @@ def test_closed_forms_of_continuous_laws_at_extreme_scales(s):
     # l1 cost 2t; at 1e160 the squared marginal W2s overflowed and "exact" W1 was 2t
     P = TensorProduct([Uniform(c, c + s), Uniform(-c, -c + 2 * s)])
     Q = TensorProduct([Uniform(c + t, c + t + s), Uniform(-c + t, -c + t + 2 * s)])
-    r = w1(P, Q)
+    r = w1(P, Q, "bracket")
     assert r.method == "bracket" and r.exact
     assert r.value == pytest.approx(math.sqrt(2.0) * t, rel=1e-12, abs=0)
     assert w1(P, Q, "product-l1").value == pytest.approx(2 * t, rel=1e-12, abs=0)
@@ -514,3 +549,65 @@ def test_pot_wrappers_refuse_costs_that_would_overflow():
     for f in (emd_dense, emd_lazy):
         with pytest.raises(InvalidInput, match="overflow"):
             f(x, w, y, w)
+
+
+# --------------------------------------------------------------------------- quantizations as inputs
+def test_w1_accepts_quantizations():
+    """Issue 18: w1(q, qref) on quantize() results raised "mu must be a numeric array"."""
+    from kinred.measures import Mixture
+    from kinred.quantize import quantize
+
+    mu = TensorProduct([Uniform(0, 1), Uniform(0, 0.5), Uniform(0, 0.25)])
+    q, qref = quantize(mu, eps=0.1), quantize(mu, eps=0.05)
+    r = w1(q, qref)                               # two tensor grids, small: the exact LP
+    assert r.exact and r.method == "exact" and r.n_atoms == (q.n_atoms, qref.n_atoms)
+    twin = w1(q.materialize(), qref.materialize(), "exact").value
+    assert r.value == pytest.approx(twin, rel=1e-12)
+    # the product structure is kept: the l1 W1 to the law is the sum of exact marginal errors
+    assert w1(q, mu, "product-l1").value == pytest.approx(q.error, rel=1e-12)
+    # 1-D: the midpoint quantizer of U(0, 1) with N atoms is at W1 = 1/(4N)
+    assert w1(quantize(Uniform(0, 1), atoms=8), Uniform(0, 1)).value == pytest.approx(1 / 32, rel=1e-12)
+    # mixtures (and push-forwards) are materialized: W1 to their own atoms is 0
+    mix = Mixture([TensorProduct([Uniform(0, 1), Uniform(0, 0.1)]),
+                   TensorProduct([Uniform(0, 0.1), Uniform(0, 1)])], [0.3, 0.7])
+    qm = quantize(mix, eps=0.1)
+    assert w1(qm, qm.materialize()).value == pytest.approx(0.0, abs=1e-15)
+    assert sliced_w1(qm, qm.materialize(), n_projections=8, seed=0).value == pytest.approx(0.0, abs=1e-15)
+    with pytest.raises(InvalidInput, match="a must be None when mu is a kinred measure or quantization"):
+        w1(q, qref, a=np.ones(q.n_atoms) / q.n_atoms)
+
+
+def test_w1_on_huge_tensor_grids_never_enumerates_them():
+    from kinred.quantize import quantize
+
+    mu = TensorProduct([Uniform(0, 0.9**j) for j in range(40)])
+    q, q2 = quantize(mu, eps=0.5), quantize(mu, eps=0.3)
+    assert q.n_atoms > 10**25
+    assert w1(q, mu, "product-l1").value == pytest.approx(q.error, rel=1e-12)
+    with pytest.raises(TooLarge, match=r"mu has 3\.\d\de\+28 atoms.*tensor grid.*method='bracket'"
+                                       r".*method='product-l1'"):
+        w1(q, q2)
+
+
+def test_w1_refuses_to_materialize_a_huge_mixture_quantization(monkeypatch):
+    from kinred.distance import _inputs
+    from kinred.measures import Mixture
+    from kinred.quantize import quantize
+
+    mix = Mixture([TensorProduct([Uniform(0, 1), Uniform(0, 1)])] * 2, [0.5, 0.5])
+    qm = quantize(mix, eps=0.05)
+    monkeypatch.setattr(_inputs, "MAX_QUANTIZATION_ATOMS", qm.n_atoms - 1)
+    with pytest.raises(TooLarge, match=rf"nu: the quantization has {qm.n_atoms} atoms"):
+        w1(np.zeros((1, 2)), qm)
+
+
+def test_w1_uses_the_stored_atoms_of_atomic_and_1d_quantizations(monkeypatch):
+    from kinred.distance import _inputs
+    from kinred.quantize import quantize
+
+    monkeypatch.setattr(_inputs, "MAX_QUANTIZATION_ATOMS", 1)   # nothing is materialized
+    x = np.random.default_rng(0).random((30, 2))
+    qa = quantize(Atomic(x), eps=0.1)                             # AtomicQuantization
+    assert w1(qa, x + [0.3, 0.4]).value == pytest.approx(0.5, rel=1e-12)
+    q1 = quantize(Uniform(0, 1), atoms=8)                          # Quantization1D
+    assert w1(q1, Uniform(0, 1)).value == pytest.approx(1 / 32, rel=1e-12)

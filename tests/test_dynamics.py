@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
-                             Effect, Field, Morse, Noise, PairwiseEffect, Quadratic, Scene,
-                             SelfPropulsion, project_state, set_num_threads,
+                             Effect, Field, Morse, Noise, PairwiseEffect, ProjectedSystem,
+                             Quadratic, Scene, SelfPropulsion, project_state, set_num_threads,
                              get_num_threads)
+from kinred.projection import jl_matrix
 from kinred.errors import InvalidInput, NotProjectable
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import centre, mean_velocity
@@ -146,6 +147,58 @@ def test_projection_rotation_equals_rotated_original():
     assert np.max(np.abs(a.x @ Q.T - b.x)) < 1e-11
     assert np.max(np.abs(a.v @ Q.T - b.v)) < 1e-11
     assert np.allclose(a.observables["gamma"], b.observables["gamma"], rtol=1e-12)
+
+
+def test_projected_gives_scene_and_state_in_one_call():
+    """``scene.projected(M, x0, v0)``: the scene of ``project(M)`` started from ``project_state``."""
+    x0, v0 = _data(40, 6, seed=7)
+    Q, _ = np.linalg.qr(np.random.default_rng(8).normal(size=(6, 6)))
+    sc = Scene([Alignment(CuckerSmale(0.8, 1.62)), AttractionRepulsion(Morse(soft=0.1)),
+                SelfPropulsion(1.0, 0.5), Drift(np.arange(6.0))], "sum")
+    p = sc.projected(Q, x0, v0)
+    assert isinstance(p, ProjectedSystem) and p.scene.order == 2 and p.scene.projection.d == 6
+    a = simulate(sc, x0, v0, (0, 1), 0.01, save=SaveAt(every=50, states=True))
+    b = simulate(*p, (0, 1), 0.01, save=SaveAt(every=50, states=True))
+    assert np.max(np.abs(a.x @ Q.T - b.x)) < 1e-11      # rotation: the projected run is the
+    assert np.max(np.abs(a.v @ Q.T - b.v)) < 1e-11      # rotated original
+    # the same numbers as the two calls by hand, for a structured map
+    M = jl_matrix(3, 6, "dct", seed=2)
+    scene_k, y0, w0 = sc.projected(M, x0, v0)
+    assert np.array_equal(y0, M.apply(x0)) and np.array_equal(w0, M.apply(v0))
+    by_hand = sc.project(M).rhs(*sc.project_state(M, x0, v0))
+    assert all(np.array_equal(u, w) for u, w in zip(scene_k.rhs(y0, w0), by_hand))
+
+
+def test_projected_first_order_closed_form():
+    # x' = c (x_c - x_i) projects to y' = c (y_c - y_i): y_i(t) - y_c = e^{-ct}(M x_i(0) - y_c)
+    x0, _ = _data(15, 5)
+    M = jl_matrix(2, 5, "gaussian", seed=0)
+    p = Scene([Aggregation(Quadratic(1.5))], "mean").projected(M, x0)
+    assert p.w0 is None and p.scene.order == 1
+    tr = simulate(*p, (0.0, 1.0), 0.001, method="rk4", save=SaveAt(states=True, every=1000))
+    y0 = x0 @ M.T
+    yc = y0.mean(axis=0)
+    assert np.max(np.abs(tr.x[-1] - (yc + np.exp(-1.5) * (y0 - yc)))) < 1e-12
+
+
+def test_projected_validation():
+    sc2, sc1 = Scene([Alignment()]), Scene([Aggregation(Quadratic(1.0))])
+    x0 = np.zeros((3, 4))
+    M = np.eye(2, 4)
+    with pytest.raises(InvalidInput, match=r"v0 must be given for a second-order"):
+        sc2.projected(M, x0)
+    with pytest.raises(InvalidInput, match=r"v0 must be None for a first-order"):
+        sc1.projected(M, x0, x0)
+    with pytest.raises(InvalidInput, match=r"x0 must have shape \(N, 4\).*shape \(2, 4\)\), got \(3, 5\)"):
+        sc2.projected(M, np.zeros((3, 5)), np.zeros((3, 5)))
+    with pytest.raises(InvalidInput, match=r"v0 must have shape \(3, 4\)"):
+        sc2.projected(M, x0, np.zeros((2, 4)))
+    with pytest.raises(InvalidInput, match="weights"):
+        Scene([Alignment()], weights=[0.5, 0.5]).projected(M, x0, x0)
+    with pytest.raises(InvalidInput, match=r"x0 must have 4 columns.*shape \(2, 4\)\), got shape \(3, 5\)"):
+        project_state(M, np.zeros((3, 5)))
+    with pytest.raises(NotProjectable):
+        Scene([Field(lambda t, x, v: np.sin(x))]).projected(M, x0, x0)
 
 
 def test_projected_noise_is_M_sigma_dW():

@@ -45,6 +45,25 @@ def test_linear_scenes_project_exactly(scene_fn):
     assert np.all(tb.term_jl == 0.0)
 
 
+def test_compare_asks_for_a_bracket_explicitly_beyond_exact_sizes(monkeypatch):
+    """w1(method="auto") raises beyond its size limit (issue 18); compare then asks for the
+    certified bracket, which its ``exact``/``lower``/``upper`` fields report."""
+    from kinred.distance import w1
+
+    d = 6
+    sc = Scene([Alignment(CuckerSmale(G=1.0, beta=0.5))])
+    sol = solve(sc, _mu(d), atoms=40, t_span=(0.0, 1.0), dt=0.05, save_every=10)
+    red = reduce(sol, M=jl_matrix(2, d, seed=0))
+    exact = compare(sol, red)
+    assert exact.exact.all() and exact.method == "exact"
+    monkeypatch.setitem(w1.__kwdefaults__, "max_exact_pairs", 10)   # every time is too large
+    br = compare(sol, red)
+    assert br.method == "bracket"
+    assert np.all(br.lower <= exact.w1 * (1 + 1e-12)) and np.all(exact.w1 <= br.upper * (1 + 1e-12))
+    # 40 atoms fit in one leaf of the hierarchical coupling: the bracket's bounds meet
+    np.testing.assert_allclose(br.w1[br.exact], exact.w1[br.exact], rtol=1e-10, atol=1e-15)
+
+
 def test_free_transport_closed_form():
     d = 4
     X0 = np.random.default_rng(0).normal(size=(7, 2 * d))

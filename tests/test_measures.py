@@ -168,3 +168,45 @@ def test_tensor_product_sampling_is_independent_per_coordinate():
     assert np.all(x[:, 1] == 3.0)
     assert abs(np.corrcoef(x[:, 0], x[:, 2])[0, 1]) < 0.05
     assert abs(x[:, 2].mean() - 1.0) < 0.03
+
+
+# ----------------------------------------------------------------------------- measure files
+def _uniform_file(params: dict, **extra):
+    from kinred.measures import measure_from_dict
+
+    return measure_from_dict({"coordinate": [{"dist": "uniform", "params": params, **extra}]},
+                             source="m.toml")
+
+
+@pytest.mark.parametrize("params", [{"a": 2.0, "b": 3.5}, {"low": 2.0, "high": 3.5},
+                                    {"loc": 2.0, "scale": 1.5}])
+def test_measure_file_uniform_accepts_the_interval_and_scipys_spelling(params):
+    """Issue 18: Uniform(a, b) in Python is [a, b]; files now accept {a, b}/{low, high} too."""
+    u = np.linspace(0.0, 1.0, 11)
+    ref = Uniform(2.0, 3.5)
+    mu = _uniform_file(params).factors[0]
+    assert mu.support == pytest.approx(ref.support, abs=0)
+    np.testing.assert_allclose(mu.ppf(u), ref.ppf(u), rtol=1e-15, atol=0)
+    np.testing.assert_allclose(mu.cdf([2.0, 2.75, 3.5]), [0.0, 0.5, 1.0], rtol=1e-15, atol=0)
+    # repeat/decay scale the interval: copy i is the law of 0.5**i X, on [2, 3.5]·0.5**i
+    widths = _uniform_file(params, repeat=3, decay=0.5).support_widths()
+    np.testing.assert_allclose(widths, [1.5, 0.75, 0.375], rtol=1e-15)
+
+
+@pytest.mark.parametrize("params, needle", [
+    ({"a": 0.0, "b": 1.0, "loc": 0.0, "scale": 1.0},
+     r"coordinate\[0\]\.params: uniform: give the interval one way.*got the keys a, b, loc, scale"),
+    ({"a": 0.0, "b": 1.0, "scale": 1.0}, "got the keys a, b, scale"),
+    ({"a": 0.0, "high": 1.0}, "got the keys a, high"),
+    ({"low": 0.0, "high": 1.0, "b": 1.0}, "got the keys b, high, low"),
+    ({"a": 0.0}, r"coordinate\[0\].params.b: missing: uniform \{a, b\} needs both ends"),
+    ({"high": 1.0}, r"params.low: missing"),
+    ({"a": 3.0, "b": 2.0}, "uniform needs a < b.*got a = 3.0, b = 2.0"),
+    ({"low": 1.0, "high": 1.0}, "uniform needs low < high"),
+    ({"a": -1e308, "b": 1e308}, "finite, positive width"),
+])
+def test_measure_file_uniform_spellings_refused(params, needle):
+    from kinred.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=needle):
+        _uniform_file(params)

@@ -325,3 +325,80 @@ def test_apply_validation():
     with pytest.raises(InvalidInput, match="8 columns"):
         P.apply(np.ones((2, 7)))
     assert P.apply(np.ones(8)).shape == (3,)
+
+
+# ----------------------------------------------------------------------------------------------
+# The array protocol: np.asarray(M), M @ x, X @ M.T, Y @ M (issue 18)
+# ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("d", [16, 13])
+def test_array_protocol_matches_dense(kind, d):
+    M = jl_matrix(5, d, kind, seed=3)
+    D = M.to_dense()
+    A = np.asarray(M)
+    assert A.shape == (5, d) and A.dtype == np.float64 and np.array_equal(A, D)
+    assert M.ndim == 2 and M.dtype == np.float64 and M.shape == (5, d)
+    rng = np.random.default_rng(1)
+    X, Y = rng.standard_normal((7, d)), rng.standard_normal((4, 5))
+    x, y = X[0], Y[0]
+    tol = 1e-12 * np.abs(D).max() * d
+    # X @ M.T is apply(X); the rows of a batch and a single vector
+    assert np.allclose(X @ M.T, M.apply(X), rtol=0, atol=tol)
+    assert np.allclose(np.matmul(X, M.T), X @ D.T, rtol=0, atol=tol)
+    assert np.allclose(M @ x, D @ x, rtol=0, atol=tol) and (M @ x).shape == (5,)
+    assert np.allclose(M @ X.T, D @ X.T, rtol=0, atol=tol)
+    # the transpose, applied without the dense matrix: Y M and Mᵀ y
+    assert np.allclose(Y @ M, Y @ D, rtol=0, atol=tol)
+    assert np.allclose(y @ M, y @ D, rtol=0, atol=tol)
+    assert np.allclose(M.T @ y, D.T @ y, rtol=0, atol=tol)
+    assert np.allclose(M.T.apply(Y), Y @ D, rtol=0, atol=tol)
+    assert np.array_equal(np.asarray(M.T), D.T) and M.T.shape == (d, 5) and M.T.T is M
+    assert np.isclose(M.T.norm(), np.linalg.norm(D, 2))
+    # a projection times a projection: the product of the matrices
+    assert np.allclose(M @ M.T, D @ D.T, rtol=0, atol=tol)
+    # stacks, as for ndarrays: (T, N, d) @ Mᵀ and M @ (T, d, m)
+    S = rng.standard_normal((3, 7, d))
+    assert np.allclose(S @ M.T, S @ D.T, rtol=0, atol=tol) and (S @ M.T).shape == (3, 7, 5)
+    St = np.swapaxes(S, 1, 2)
+    assert np.allclose(M @ St, D @ St, rtol=0, atol=tol) and (M @ St).shape == (3, 5, 7)
+
+
+@pytest.mark.parametrize("kind", ["srht", "dct"])
+def test_matmul_keeps_structured_apply(kind, monkeypatch):
+    """``X @ M.T`` and ``Y @ M`` never build the dense matrix of a structured map."""
+    M = jl_matrix(4, 32, kind, seed=0)
+    D = M.to_dense()
+    monkeypatch.setattr(SRHTProjection, "to_dense", lambda self: pytest.fail("dense matrix built"))
+    X = np.random.default_rng(0).standard_normal((3, 32))
+    assert np.allclose(X @ M.T, X @ D.T, atol=1e-12)
+    assert np.allclose(np.ones((2, 4)) @ M, np.ones((2, 4)) @ D, atol=1e-12)
+
+
+def test_asarray_copy_and_dtype():
+    P = DenseProjection(np.eye(2, 3))
+    assert np.asarray(P, copy=False) is P.matrix
+    assert np.asarray(P, dtype=np.float32).dtype == np.float32
+    c = np.array(P, copy=True)
+    c[0, 0] = 7.0
+    assert P.matrix[0, 0] == 1.0
+    S = jl_matrix(2, 8, "srht", seed=0)
+    with pytest.raises(InvalidInput, match=r"copy=False.*\(2, 8\) matrix"):
+        np.asarray(S, copy=False)
+
+
+@pytest.mark.parametrize("expr, match", [
+    (lambda M: M @ np.ones(3), r"M @ x: shapes \(4, 13\) and \(3,\).*\(13,\) or \(\.\.\., 13, m\)"),
+    (lambda M: M @ np.ones((4, 2)), r"M @ x: shapes \(4, 13\) and \(4, 2\)"),
+    (lambda M: M @ np.ones((13, 2, 2)), r"shapes \(4, 13\) and \(13, 2, 2\)"),
+    (lambda M: M @ np.float64(2.0), r"shapes \(4, 13\) and \(\)"),
+    (lambda M: np.ones((2, 4)) @ M.T, r"x @ M.T: shapes \(2, 4\) and \(13, 4\).*\(\.\.\., 13\)"),
+    (lambda M: np.ones((2, 13)) @ M, r"x @ M: shapes \(2, 13\) and \(4, 13\).*\(4,\) or \(\.\.\., 4\)"),
+    (lambda M: M.T @ np.ones(13), r"M.T @ x: shapes \(13, 4\) and \(13,\)"),
+    (lambda M: M @ np.full(13, np.nan), "must be finite"),
+    (lambda M: M @ "abc", "must be a numeric array"),
+])
+@pytest.mark.parametrize("kind", ["gaussian", "achlioptas", "srht"])
+def test_matmul_shape_errors_name_the_shapes(kind, expr, match):
+    M = jl_matrix(4, 13, kind, seed=0)
+    with pytest.raises(InvalidInput, match=match):
+        expr(M)

@@ -362,3 +362,21 @@ def test_isotropic_curse_beyond_float_range():
     q = quantize(TensorProduct([Uniform(0.0, 1.0)] * 200), eps=1.0)
     assert q.n_atoms == 100**200
     assert "n_atoms=1.000e+400" in repr(q) and len(repr(q)) < 200
+
+
+def test_budget_repr_is_short_for_d_200_and_huge_counts():
+    """Issue 18: the repr printed all 200 widths (about 4600 characters)."""
+    b = budget(0.99 ** np.arange(200), eps=0.01, node_limit=200)
+    assert b.n_atoms > 10**300                            # beyond the float range
+    r = repr(b)
+    assert len(r) < 250 and r.count("\n") == 0
+    assert r.startswith("Budget(d=200, eps=0.01, rule='midpoint', n_atoms=")
+    assert f"k_bar={b.k_bar}" in r and "…" in r
+    assert f"counts=({b.counts[0]}, {b.counts[1]}, {b.counts[2]}, {b.counts[3]}, …, " \
+           f"{b.counts[-2]}, {b.counts[-1]})" in r
+    a = budget(np.ones(200), atoms=10**80)
+    assert "atoms=1.000e+80" in repr(a) and f"n_atoms={float(a.n_atoms):.3e}" in repr(a)
+    assert len(repr(a)) < 250
+    small = budget([1.0, 0.5, 0.25, 0.0], eps=0.25)       # d <= 8: every count and width
+    assert repr(small) == ("Budget(d=4, eps=0.25, rule='midpoint', n_atoms=30, bound=0.245833, "
+                           "k_bar=3, counts=(5, 3, 2, 1), widths=(1, 0.5, 0.25, 0), optimal=True)")

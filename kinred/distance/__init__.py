@@ -2,7 +2,10 @@
 
 :func:`w1` returns a :class:`W1Result` saying what it computed: exact values (POT's network
 simplex with a dense or lazily evaluated Euclidean cost, exact 1-D formulas, the exact ℓ1 W1
-of product measures) or, beyond exact sizes, a certified bracket ``[lower, upper]``.
+of product measures) or, when asked for with ``method="bracket"``, a certified bracket
+``[lower, upper]``. The default ``method="auto"`` returns exact values only: beyond the exact
+sizes it raises, naming the exact method, its cost and the bracket. Measures, arrays of
+points and :mod:`kinred.quantize` results are accepted alike.
 :func:`sliced_w1` is a different distance and is kept under its own name.
 
 This is the only package of kinred that imports POT (``ot``), lazily.

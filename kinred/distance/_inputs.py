@@ -1,6 +1,7 @@
 """Normalization of the measures handed to :func:`kinred.distance.w1`.
 
-Every argument becomes one of three internal forms:
+Every argument (an array of points, a kinred measure or a :mod:`kinred.quantize` result)
+becomes one of three internal forms:
 
 * :class:`Pts` -- atoms ``points (N, d)`` with probability ``weights (N,)``;
 * :class:`Cont1D` -- a continuous 1-D law with ``cdf``, ``ppf`` and compact ``support``;
@@ -21,7 +22,7 @@ import math
 import numpy as np
 
 from .._validate import as_array, as_weights
-from ..errors import InvalidInput
+from ..errors import InvalidInput, TooLarge
 
 __all__ = ["Pts", "Cont1D", "Prod", "normalize", "normalize_pair", "common_frame", "grid_marginals"]
 
@@ -92,10 +93,11 @@ class Prod:
     def all_atomic(self) -> bool:
         return all(isinstance(f, Pts) for f in self.factors)
 
-    def grid_size(self) -> float:
+    def grid_size(self) -> float | int:
+        """Atoms of the full tensor grid: an exact int (inf for a continuous factor)."""
         if not self.all_atomic:
             return float("inf")
-        return float(np.prod([float(f.n) for f in self.factors]))
+        return math.prod(f.n for f in self.factors)
 
     def materialize(self) -> Pts:
         """The full tensor grid of an all-atomic product (caller checks the size)."""
@@ -182,15 +184,25 @@ def _measure_classes():
     return measures
 
 
+#: Most atoms a quantization without tensor structure (mixture, push-forward) is
+#: materialized to for W1 (:class:`~kinred.errors.TooLarge` above).
+MAX_QUANTIZATION_ATOMS = 10**6
+
+
 def normalize(obj, w, name: str, wname: str):
-    """Turn ``obj`` (array or kinred measure) with optional weights ``w`` into Pts/Cont1D/Prod."""
+    """Turn ``obj`` (array, kinred measure or quantization) with optional weights ``w`` into
+    Pts/Cont1D/Prod."""
+    from ..quantize import Quantization
+
     ms = _measure_classes()
-    if isinstance(obj, ms.Measure):
+    if isinstance(obj, (ms.Measure, Quantization)):
         if w is not None:
             raise InvalidInput(
-                f"{wname} must be None when {name} is a kinred measure (it carries its own "
-                f"weights), got {type(w).__name__}"
+                f"{wname} must be None when {name} is a kinred measure or quantization (it "
+                f"carries its own weights), got {type(w).__name__}"
             )
+        if isinstance(obj, Quantization):
+            return _from_quantization(obj, name)
         return _from_measure(obj, name, ms)
     X = as_array(obj, name, ndim=(1, 2))
     if X.ndim == 1:
@@ -199,6 +211,31 @@ def normalize(obj, w, name: str, wname: str):
         raise InvalidInput(f"{name} must hold at least one point of dimension >= 1, got shape {X.shape}")
     W = as_weights(w, wname, X.shape[0])
     return Pts(np.ascontiguousarray(X, dtype=np.float64), W)
+
+
+def _from_quantization(q, name):
+    """The atoms of a quantization result: stored atoms as they are (1-D quantile atoms, an
+    atomic measure), a tensor grid as the product of its 1-D factors (never enumerated here),
+    every other kind materialized up to :data:`MAX_QUANTIZATION_ATOMS` atoms."""
+    from ..quantize import AtomicQuantization, Quantization1D, TensorQuantization
+
+    if isinstance(q, Quantization1D):
+        return Pts(np.ascontiguousarray(q.points, dtype=np.float64).reshape(-1, 1),
+                   np.asarray(q.weights, dtype=np.float64))
+    if isinstance(q, AtomicQuantization):
+        return _from_measure(q.measure, name, _measure_classes())
+    if isinstance(q, TensorQuantization):
+        factors = []
+        for f in q.factors:
+            a = f.materialize()
+            factors.append(Pts(np.ascontiguousarray(a.points, dtype=np.float64),
+                               np.asarray(a.weights, dtype=np.float64)))
+        return Prod(factors)
+    try:
+        a = q.materialize(max_atoms=MAX_QUANTIZATION_ATOMS)
+    except TooLarge as exc:
+        raise TooLarge(f"{name}: {exc}") from None
+    return Pts(np.ascontiguousarray(a.points, dtype=np.float64), np.asarray(a.weights, float))
 
 
 def _from_measure(m, name, ms):
@@ -230,7 +267,8 @@ def _from_measure(m, name, ms):
     raise InvalidInput(
         f"{name}: W1 is not available for a {type(m).__name__} (supported: Atomic, Dirac, "
         "Empirical1D, Univariate, Uniform, TensorProduct of 1-D measures, Mixture of atomic "
-        "measures, or an (N, d) array of points); quantize it first (kinred.quantize)"
+        "measures, a kinred.quantize result, or an (N, d) array of points); quantize it first "
+        "(kinred.quantize)"
     )
 
 

@@ -25,8 +25,16 @@ METHODS = ("auto", "exact", "exact-lazy", "exact-1d", "product-l1", "bracket")
 DEFAULT_MAX_DENSE_BYTES = 2**27
 
 #: "auto" solves the exact LP only while N·M stays below this (6000 × 6000 atoms; its cost at
-#: this size is in docs/performance.md, section W1); beyond it, it returns a certified bracket.
+#: this size is in docs/performance.md, section W1); beyond it, it raises TooLarge with the cost
+#: of the exact LP (a certified bracket is ``method="bracket"``).
 DEFAULT_MAX_EXACT_PAIRS = 36_000_000
+
+#: Measured cost of ``exact-lazy`` at N = M = 6000 (N·M = DEFAULT_MAX_EXACT_PAIRS) on the
+#: loaded 2-core development VM, and the growth of the time with N·M (N = M = 2000, 4000, 6000:
+#: 9.1 s, 72 s, 218 s, i.e. about (N·M)^1.4); docs/performance.md, section W1. Only used to
+#: quote an order of magnitude when "auto" refuses a size.
+_LAZY_SECONDS_AT_LIMIT = 218.0
+_LAZY_TIME_EXPONENT = 1.4
 
 _GRID_ATOMS = 2000
 
@@ -35,7 +43,7 @@ _MAX_MATERIALIZE = 10**6
 
 
 def _n_atoms(m):
-    return m.n if isinstance(m, Pts) else (int(m.grid_size()) if isinstance(m, Prod) and m.all_atomic else None)
+    return m.n if isinstance(m, Pts) else (m.grid_size() if isinstance(m, Prod) and m.all_atomic else None)
 
 
 def _as_pts(m, max_pairs_side: float):
@@ -140,10 +148,12 @@ def w1(
 
     Parameters
     ----------
-    mu, nu : kinred measure or (N, d) array_like
+    mu, nu : kinred measure, quantization or (N, d) array_like
         ``Atomic`` (incl. ``Dirac``, ``Empirical1D``), ``Univariate``/``Uniform``,
-        ``TensorProduct`` of 1-D measures, ``Mixture`` of atomic measures, or raw points
-        ``(N, d)`` (a 1-D array is ``N`` points of ℝ¹).
+        ``TensorProduct`` of 1-D measures, ``Mixture`` of atomic measures, a result of
+        :func:`kinred.quantize.quantize` (a ``TensorQuantization`` is used as the product of its
+        1-D factors, never enumerated; mixtures and push-forwards are materialized, up to
+        10⁶ atoms), or raw points ``(N, d)`` (a 1-D array is ``N`` points of ℝ¹).
     method : {"auto", "exact", "exact-lazy", "exact-1d", "product-l1", "bracket"}
         * ``"exact"`` -- two atomic measures: ``ot.emd2`` on the dense Euclidean cost matrix
           (8·N·M bytes), ``numItermax = max(100000, 50·N·M)``; raises
@@ -157,9 +167,13 @@ def w1(
           :math:`\sum_j W_1(\mu_j,\nu_j)` (Lemma 4.1, label ``lem:W:tensors``); it bounds the
           Euclidean W1 from above. The result has ``metric="l1"``.
         * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (lower bounds from 1-D projections and a subsampled dual, upper bounds from explicit couplings).
-        * ``"auto"`` -- exact-1d in d = 1; exact (dense below ``max_dense_bytes``, lazy above)
-          for atomic measures with ``N·M ≤ max_exact_pairs``; otherwise a bracket. Its
-          ``method`` and ``note`` say which.
+        * ``"auto"`` -- an exact value, never a bracket: exact-1d in d = 1; exact (dense below
+          ``max_dense_bytes``, lazy above) for atomic measures (or tensor grids of at most 10⁶
+          atoms) with ``N·M ≤ max_exact_pairs``; product-l1 for ``metric="l1"`` and two product
+          measures. Otherwise it raises (:class:`~kinred.errors.TooLarge` for sizes,
+          :class:`~kinred.errors.InvalidInput` for continuous laws in d > 1) naming the sizes,
+          the method that would be exact and its estimated cost, and ``method="bracket"``. Its
+          ``method`` and ``note`` say which method ran.
     a, b : (N,) / (M,) array_like, optional
         Weights of raw point arrays ``mu``/``nu`` (uniform by default); must be None for measures.
     metric : {"euclidean", "l1"}
@@ -191,7 +205,9 @@ def w1(
     NotConverged
         POT stopped before optimality.
     TooLarge
-        ``method="exact"`` with a cost matrix above ``max_dense_bytes``.
+        ``method="exact"`` with a cost matrix above ``max_dense_bytes``; ``method="auto"``
+        beyond ``max_exact_pairs`` (or a tensor grid of more than 10⁶ atoms) for the
+        Euclidean metric; a quantization to materialize above 10⁶ atoms.
 
     Examples
     --------
@@ -276,11 +292,12 @@ def _unwrap_1d(m):
 
 
 def _resolve_auto(p: _Problem) -> tuple[str, _Problem]:
-    """The method "auto" picks for ``p``, and ``p`` with its atoms materialized for an exact LP.
+    """The exact method "auto" picks for ``p``, and ``p`` with its atoms materialized for an LP.
 
     exact-1d in d = 1; the exact LP (dense below ``max_dense_bytes``, lazy above) for atomic
-    measures (or small all-atomic products) with ``N·M ≤ max_exact_pairs``; otherwise
-    product-l1 for ``metric="l1"`` and a bracket for the Euclidean metric.
+    measures (or all-atomic products of at most 10⁶ atoms) with ``N·M ≤ max_exact_pairs``;
+    product-l1 for ``metric="l1"`` and two product measures. Otherwise no exact method fits:
+    :func:`_no_exact_method` says why, what would be exact and at what cost.
     """
     if p.d == 1:
         return "exact-1d", p
@@ -289,14 +306,54 @@ def _resolve_auto(p: _Problem) -> tuple[str, _Problem]:
     if PA is not None and PB is not None and PA.n * PB.n <= p.max_exact_pairs:
         method = "exact" if 8 * PA.n * PB.n <= p.max_dense_bytes else "exact-lazy"
         return method, replace(p, A=PA, B=PB, n_atoms=(PA.n, PB.n))
-    if p.metric != "l1":
-        return "bracket", p
-    if _marginals(p.A, p.product) is None or _marginals(p.B, p.product) is None:
-        raise InvalidInput(
-            f"metric='l1' with method='auto' needs atomic measures with N·M <= "
-            f"max_exact_pairs={p.max_exact_pairs} or two product measures"
-        )
-    return "product-l1", p
+    products = _marginals(p.A, p.product) is not None and _marginals(p.B, p.product) is not None
+    if p.metric == "l1" and products:
+        return "product-l1", p
+    raise _no_exact_method(p, products)
+
+
+def _fmt_count(n) -> str:
+    """An atom count (exact int, possibly astronomically large) in a few characters."""
+    s = str(int(n))
+    return s if len(s) <= 12 else f"{s[0]}.{s[1:3]}e+{len(s) - 1}"
+
+
+def _fmt_seconds(s: float) -> str:
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if s >= 2 * size:
+            return f"{s / size:.2g} {unit}"
+    return f"{s:.2g} s"
+
+
+def _no_exact_method(p: _Problem, products: bool) -> Exception:
+    """The error of "auto" when no exact method fits ``p``: sizes, the exact method and its cost,
+    and the explicit alternatives (a bracket, the l1 W1 of products, raising the limit)."""
+    alt = ("ask method='bracket' for a certified bracket lower <= W1 <= upper (its W1Result "
+           "has exact=False unless the bounds meet)")
+    if products:
+        alt += (", or method='product-l1' for the exact W1 for the l1 ground cost (Lemma 4.1; an "
+                "upper bound of the Euclidean W1)")
+    if None in p.n_atoms:
+        which = [n for n, c in zip(("mu", "nu"), p.n_atoms) if c is None]
+        what = "mu and nu are continuous laws" if len(which) == 2 else f"{which[0]} is a continuous law"
+        return InvalidInput(
+            f"w1(method='auto'): {what} in d = {p.d}, and no method computes their "
+            f"{p.metric} W1 exactly; {alt}; or quantize (kinred.quantize) and compare the atoms "
+            "exactly")
+    n, m = p.n_atoms
+    pairs = n * m
+    sizes = f"mu has {_fmt_count(n)} atoms and nu {_fmt_count(m)} (N·M = {_fmt_count(pairs)})"
+    if max(n, m) > _MAX_MATERIALIZE:
+        return TooLarge(
+            f"w1(method='auto'): {sizes}; the exact LP needs the atoms of a tensor grid of more "
+            f"than {_MAX_MATERIALIZE:.0e} atoms, which kinred never builds; {alt}")
+    seconds = _LAZY_SECONDS_AT_LIMIT * (pairs / DEFAULT_MAX_EXACT_PAIRS) ** _LAZY_TIME_EXPONENT
+    return TooLarge(
+        f"w1(method='auto'): {sizes} > max_exact_pairs = {p.max_exact_pairs}. The exact W1 is "
+        f"method='exact-lazy' (POT network simplex, memory O(N + M), time roughly "
+        f"{_fmt_seconds(seconds)} on the loaded 2-core reference VM, docs/performance.md) or method='exact' (a dense "
+        f"{8 * pairs / 2**30:.3g} GiB cost matrix, 2-3x faster); pass max_exact_pairs >= "
+        f"{pairs} to let 'auto' run it, or {alt}")
 
 
 def _to_units(value: float, unit: float, what: str) -> float:

@@ -16,10 +16,11 @@ from .effects import (
     SelfPropulsion,
 )
 from .kernels import CuckerSmale, Kernel, Morse, Quadratic
-from .scene import Scene, project_state
+from .scene import ProjectedSystem, Scene, project_state
 
 __all__ = [
     "Scene",
+    "ProjectedSystem",
     "project_state",
     "Effect",
     "PairwiseEffect",

@@ -30,7 +30,7 @@ evaluation.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -41,10 +41,31 @@ from ..projection import as_projection
 from .. import _parallel
 from .effects import Effect
 
-__all__ = ["Scene", "project_state"]
+__all__ = ["Scene", "ProjectedSystem", "project_state"]
 
 #: Plans kept per scene (e.g. a few shapes or thread counts in one session).
 _PLANS_KEEP = 4
+
+
+class ProjectedSystem(NamedTuple):
+    """The projected system and its initial state, from :meth:`Scene.projected`.
+
+    A named tuple: ``scene_k, y0, w0 = scene.projected(M, x0, v0)`` or
+    ``simulate(*scene.projected(M, x0, v0), t_span, dt)``.
+
+    Attributes
+    ----------
+    scene : Scene
+        The projected scene on ``ℝᵏ`` (eq. (2.4)–(2.5), eq. (3.5)).
+    y0 : (N, k) ndarray
+        ``M x⁰`` row-wise.
+    w0 : (N, k) ndarray or None
+        ``M v⁰`` row-wise; None for a first-order scene.
+    """
+
+    scene: "Scene"
+    y0: np.ndarray
+    w0: np.ndarray | None
 
 
 class Scene:
@@ -264,7 +285,7 @@ class Scene:
         Returns
         -------
         Scene
-            On ``ℝᵏ``; start it from :meth:`project_state`.
+            On ``ℝᵏ``; start it from :meth:`project_state`, or get both from :meth:`projected`.
 
         Examples
         --------
@@ -296,6 +317,58 @@ class Scene:
         """Initial state of the projected system: ``(M x⁰, M v⁰)`` (``v0`` None for order 1)."""
         return project_state(M, x0, v0)
 
+    def projected(self, M, x0, v0=None) -> ProjectedSystem:
+        """The projected scene and its initial state in one call: :meth:`project` and
+        :meth:`project_state` with the same ``M``.
+
+        The system (2.4)–(2.5) (labels ``eq:eul2``–``eq:eul3``; eq. (3.5)) started from
+        ``y⁰ = M x⁰``, ``w⁰ = M v⁰`` row-wise.
+
+        Parameters
+        ----------
+        M : (k, d) ndarray or Projection
+        x0 : (N, d) array_like
+            Initial positions in ``ℝᵈ``.
+        v0 : (N, d) array_like or None
+            Initial velocities: required for a second-order scene, None for a first-order one.
+
+        Returns
+        -------
+        ProjectedSystem
+            The named tuple ``(scene, y0, w0)``; ``w0`` is None for a first-order scene.
+
+        Raises
+        ------
+        InvalidInput
+            ``x0`` not ``(N, d)`` with ``d`` the source dimension of ``M``, ``v0`` missing
+            (order 2), given (order 1) or of another shape than ``x0``, or ``N`` different
+            from the scene's number of weights.
+        NotProjectable
+            An effect outside the paper's class (1.1), as for :meth:`project`.
+
+        Examples
+        --------
+        >>> from kinred.dynamics import Scene, Alignment
+        >>> p = Scene([Alignment()]).projected(np.eye(1, 2), [[1.0, 2.0]], [[3.0, 4.0]])
+        >>> p.scene.order, p.y0, p.w0
+        (2, array([[1.]]), array([[3.]]))
+        """
+        P = as_projection(M)
+        x0 = as_array(x0, "x0", ndim=2)
+        if x0.shape[0] < 1 or x0.shape[1] != P.d:
+            raise InvalidInput(
+                f"x0 must have shape (N, {P.d}) with N >= 1 (d = {P.d}, the source dimension "
+                f"of M of shape {P.shape}), got {x0.shape}")
+        if self.order == 2 and v0 is None:
+            raise InvalidInput("v0 must be given for a second-order scene (order 2), got None")
+        if self.order == 1 and v0 is not None:
+            raise InvalidInput("v0 must be None for a first-order scene (order 1), got an array")
+        if self.weights is not None:
+            self.agent_weights(x0.shape[0])
+        scene = self.project(P)
+        y0, w0 = project_state(P, x0, v0)
+        return ProjectedSystem(scene, y0, w0)
+
     def __repr__(self) -> str:
         w = "None" if self.weights is None else f"<{self.weights.shape[0]}>"
         ps = "" if repr(self.pairsum) == "Dense()" else f", pairsum={self.pairsum!r}"
@@ -324,6 +397,9 @@ def project_state(M, x0, v0=None):
     """
     P = as_projection(M)
     x0 = as_array(x0, "x0", ndim=2)
+    if x0.shape[1] != P.d:
+        raise InvalidInput(f"x0 must have {P.d} columns (d, the source dimension of M of "
+                           f"shape {P.shape}), got shape {x0.shape}")
     y0 = P.apply(x0)
     w0 = None if v0 is None else P.apply(as_array(v0, "v0", shape=x0.shape))
     return y0, w0

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidInput
+from ..errors import InvalidInput, TooLarge
 from ._solution import KineticSolution, ReducedSolution
 
 __all__ = ["Comparison", "ReferenceEstimate", "compare", "reference_estimate", "milling_index"]
@@ -66,9 +66,15 @@ def _row_norms(D: np.ndarray) -> np.ndarray:
 
 
 def _w1_atoms(A, B, wa, wb):
+    """The exact W1 of two atomic measures (``w1(method="auto")``), or, when its size limits
+    refuse them (:class:`~kinred.errors.TooLarge`, raised before any work), the certified
+    bracket asked for explicitly; ``exact``/``lower``/``upper`` of the result say which."""
     from ..distance import w1
 
-    return w1(A, B, method="auto", a=wa, b=wb)
+    try:
+        return w1(A, B, method="auto", a=wa, b=wb)
+    except TooLarge:
+        return w1(A, B, method="bracket", a=wa, b=wb)
 
 
 def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:

@@ -30,6 +30,10 @@ A mixture replaces the top-level ``[[coordinate]]`` tables by components::
     dist = "uniform"
     params = {loc = 2.0, scale = 1.0}
 
+A uniform law may be written by its interval, as ``Uniform(a, b)`` in Python:
+``params = {a = 2.0, b = 3.0}`` (or ``{low = 2.0, high = 3.0}``), or by scipy's
+``{loc = 2.0, scale = 1.0}`` (the interval ``[loc, loc + scale]``); one spelling per table.
+
 Coordinates make a :class:`~kinred.measures.TensorProduct`; components a
 :class:`~kinred.measures.Mixture` (weights must sum to one). Unknown keys, unknown
 distributions, invalid parameters, NaN, empty or reversed supports and bad weights raise
@@ -81,6 +85,39 @@ def _check_keys(table, allowed, source, where):
         )
 
 
+#: The interval spellings of a uniform law's parameters, besides scipy's ``{loc, scale}``.
+_UNIFORM_ENDS = (("a", "b"), ("low", "high"))
+
+
+def _uniform_params(pvals: dict, source: str, key: str) -> dict:
+    """scipy's ``{loc, scale}`` for a uniform law given by its interval ``{a, b}`` or
+    ``{low, high}`` (as ``Uniform(a, b)``); scipy's own spelling is passed through.
+
+    Mixing spellings (even consistent ones), one end without the other, any other key, or
+    ``a >= b`` is a :class:`~kinred.errors.ConfigError` naming the keys.
+    """
+    ends = [pair for pair in _UNIFORM_ENDS if set(pair) & set(pvals)]
+    if not ends:
+        return pvals
+    lo_k, hi_k = ends[0]
+    others = sorted(set(pvals) - {lo_k, hi_k})
+    if len(ends) > 1 or others:
+        raise _err(source, f"{key}.params",
+                   f"uniform: give the interval one way, {{a, b}}, {{low, high}} or scipy's "
+                   f"{{loc, scale}} (the interval [loc, loc + scale]); got the keys "
+                   f"{', '.join(sorted(pvals))}")
+    missing = [k for k in (lo_k, hi_k) if k not in pvals]
+    if missing:
+        raise _err(source, f"{key}.params.{missing[0]}",
+                   f"missing: uniform {{{lo_k}, {hi_k}}} needs both ends of the interval")
+    lo, hi = pvals[lo_k], pvals[hi_k]
+    if not (lo < hi and math.isfinite(hi - lo)):
+        raise _err(source, f"{key}.params",
+                   f"uniform needs {lo_k} < {hi_k} (a finite, positive width), got "
+                   f"{lo_k} = {lo!r}, {hi_k} = {hi!r}")
+    return {"loc": lo, "scale": hi - lo}
+
+
 def _coordinates(tables, source, where) -> list[Measure]:
     if not isinstance(tables, list) or not tables:
         raise _err(source, where, "must be a non-empty array of tables ([[coordinate]])")
@@ -121,6 +158,8 @@ def _coordinates(tables, source, where) -> list[Measure]:
         if not isinstance(params, dict):
             raise _err(source, f"{key}.params", f"must be a table, got {params!r}")
         pvals = {k: _number(v, source, f"{key}.params.{k}") for k, v in params.items()}
+        if name == "uniform":
+            pvals = _uniform_params(pvals, source, key)
         try:
             shapes, loc, scale = gen._parse_args(**pvals)
         except TypeError as exc:

@@ -5,9 +5,12 @@
 * :func:`jl_min_dim` is the Dasgupta–Gupta bound on ``k``;
 * :func:`distortion` and :func:`trajectory_distortion` measure eq. (2.1) on a cloud and
   condition (3.4) along a trajectory.
+
+Every map is a :class:`Projection`, which numpy code can use as its ``(k, d)`` matrix:
+``np.asarray(M)``, ``M @ x``, ``X @ M.T`` (``M.T`` is a :class:`TransposedProjection`).
 """
 
-from ._base import DenseProjection, Projection, as_projection
+from ._base import DenseProjection, Projection, TransposedProjection, as_projection
 from ._distortion import (
     DistortionResult,
     TrajectoryDistortionResult,
@@ -19,6 +22,7 @@ from ._jl import KINDS, SparseProjection, SRHTProjection, fwht, jl_matrix, jl_mi
 __all__ = [
     "Projection",
     "DenseProjection",
+    "TransposedProjection",
     "SparseProjection",
     "SRHTProjection",
     "as_projection",

@@ -167,6 +167,10 @@ class SparseProjection(Projection):
         # (M Xᵀ)ᵀ: sparse × dense costs O(nnz · n).
         return np.ascontiguousarray(np.asarray(self.matrix @ X.T).T)
 
+    def _rapply(self, Y: np.ndarray) -> np.ndarray:
+        # Y M = (Mᵀ Yᵀ)ᵀ, sparse as well.
+        return np.ascontiguousarray(np.asarray(self.matrix.T @ Y.T).T)
+
     def to_dense(self) -> np.ndarray:
         return self.matrix.toarray()
 
@@ -226,6 +230,21 @@ class SRHTProjection(Projection):
         else:
             Y = scipy.fft.dct(X * self.signs, type=2, norm="ortho", axis=1)
         out = Y[:, self.rows]
+        out *= self.scale
+        return out
+
+    def _rapply(self, Y: np.ndarray) -> np.ndarray:
+        """``Y M = √(d'/k) (Y P) T D`` row-wise: scatter into the kept rows, inverse transform
+        (``H`` is symmetric and orthonormal, the DCT-II's inverse is its transpose), cut the
+        padding, multiply by the signs; same cost as :meth:`apply`."""
+        n = Y.shape[0]
+        Z = np.zeros((n, self.d_padded))
+        Z[:, self.rows] = Y
+        if self.transform == "hadamard":
+            Z = _fwht_rows(Z)
+        else:
+            Z = scipy.fft.idct(Z, type=2, norm="ortho", axis=1)
+        out = Z[:, :self.d] * self.signs
         out *= self.scale
         return out
 

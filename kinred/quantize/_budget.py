@@ -70,6 +70,27 @@ class Budget:
     recipe: Recipe
     nodes: int
 
+    def __repr__(self) -> str:
+        """One short line whatever ``d`` and ``N``: the target, ``N`` (exact up to 15 digits,
+        else in scientific notation from its digits), the bound, ``k̄``, and the first and
+        last widths and counts around an ellipsis."""
+        from ._quantization import _fmt_count
+
+        target = f"eps={self.eps:.6g}" if self.eps is not None else f"atoms={_fmt_count(self.atoms)}"
+        return (f"Budget(d={len(self.counts)}, {target}, rule={self.rule!r}, "
+                f"n_atoms={_fmt_count(self.n_atoms)}, bound={self.bound:.6g}, k_bar={self.k_bar}, "
+                f"counts={_ends(self.counts, str)}, widths={_ends(self.widths, '{:.3g}'.format)}, "
+                f"optimal={self.optimal})")
+
+
+def _ends(values, fmt, head: int = 4, tail: int = 2) -> str:
+    """``(v0, v1, v2, v3, …, v[-2], v[-1])``, or every value when there are at most 8."""
+    if len(values) <= head + tail + 2:
+        parts = [fmt(v) for v in values]
+    else:
+        parts = [fmt(v) for v in values[:head]] + ["…"] + [fmt(v) for v in values[-tail:]]
+    return "(" + ", ".join(parts) + ")"
+
 
 def paper_recipe(widths, eps: float, *, rule: str = "midpoint") -> Recipe:
     """The paper's recipe for eq. (4.22) (label ``delayed``); see :class:`Recipe`.
