@@ -8,6 +8,8 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
 * :class:`Dense` (the default, ``pairsum="fast"``): exact, blocked BLAS products and numba
   kernels, threads; float64 or mixed float32 pair sums.
 * :class:`Numpy` (``pairsum="numpy"``): the plain-numpy twin, the reference in tests.
+* :class:`RandomBatch` (``pairsum="random_batch"``, ``p = 2``): the random batch method,
+  pair sums inside random batches of ``p`` agents, unbiased, ``O(N p d)`` per evaluation.
 
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
@@ -16,7 +18,8 @@ through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form
 from ._select import as_pairsum
 from .dense import Dense, DensePlan
+from .random_batch import RandomBatch, RandomBatchPlan
 from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
-           "as_pairsum", "compiled_form", "COMPILED_KINDS"]
+           "RandomBatch", "RandomBatchPlan", "as_pairsum", "compiled_form", "COMPILED_KINDS"]
