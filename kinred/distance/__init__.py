@@ -7,10 +7,13 @@ of product measures) or, when asked for with ``method="bracket"``, a certified b
 sizes it raises, naming the exact method, its cost and the bracket. Measures, arrays of
 points and :mod:`kinred.quantize` results are accepted alike.
 :func:`sliced_w1` is a different distance and is kept under its own name.
+:func:`paired_w1_bracket` brackets W1 between two measures whose atoms correspond (same count,
+same weights) in ``O(N log N)`` without a linear program, for any number of atoms.
 
 This is the only package of kinred that imports POT (``ot``), lazily.
 """
 
+from ._paired import W1Bracket, paired_w1_bracket
 from ._pot import default_num_iter_max
 from ._result import SlicedW1Result, W1Result
 from ._w1 import DEFAULT_MAX_DENSE_BYTES, DEFAULT_MAX_EXACT_PAIRS, METHODS, sliced_w1, w1
@@ -18,7 +21,9 @@ from ._w1 import DEFAULT_MAX_DENSE_BYTES, DEFAULT_MAX_EXACT_PAIRS, METHODS, slic
 __all__ = [
     "w1",
     "sliced_w1",
+    "paired_w1_bracket",
     "W1Result",
+    "W1Bracket",
     "SlicedW1Result",
     "METHODS",
     "DEFAULT_MAX_DENSE_BYTES",

@@ -3,7 +3,8 @@
 The data flow of §4.3: a phase-space measure ``μ₀`` on ``ℝ²ᵈ`` is quantized into atoms
 (:func:`solve`, delayed-curse budget), the weighted particle system gives ``μᴺ(t)``; the
 projected atoms ``M#μ₀ᴺ`` start the reduced system in ``ℝ²ᵏ`` (:func:`reduce`), giving
-``νᴺ(t)``; :func:`compare` computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly and :func:`theorem_bound`
+``νᴺ(t)``; :func:`compare` computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly (a certified bracket above
+:data:`MAX_POT_ATOMS` atoms) and :func:`theorem_bound`
 the right-hand side of eq. (4.17) (label ``eq:approxkin``) with the constants of its proof.
 See docs/kinetic.md.
 """
@@ -17,7 +18,8 @@ from ._bounds import (
     stability_constant,
     theorem_bound,
 )
-from ._compare import Comparison, ReferenceEstimate, compare, milling_index, reference_estimate
+from ._compare import (MAX_POT_ATOMS, Comparison, ReferenceEstimate, compare, milling_index,
+                       reference_estimate)
 from ._solution import (
     KineticSolution,
     ReducedSolution,
@@ -32,6 +34,7 @@ __all__ = [
     "solve",
     "reduce",
     "compare",
+    "MAX_POT_ATOMS",
     "reference_estimate",
     "theorem_bound",
     "phase_space",

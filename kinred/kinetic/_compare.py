@@ -3,7 +3,10 @@ r"""W1 between the projected and the reduced particle solutions, and reference e
 What is exact and what is an estimate
 -------------------------------------
 * :func:`compare` -- ``W1(M#μᴺ(t), νᴺ(t))`` on ``ℝ²ᵏ``: **exact** (POT's network simplex on
-  the two atomic measures, :func:`kinred.distance.w1`; ``exact`` says so per time), with the
+  the two atomic measures, :func:`kinred.distance.w1`; ``exact`` says so per time) up to
+  ``max_pot_atoms`` atoms (:data:`MAX_POT_ATOMS`); above, no linear program is solved and a
+  **certified bracket** is reported (:func:`kinred.distance.paired_w1_bracket`: max-sliced
+  lower bound, index-coupling upper bound, ``O(N log N)``), with the
   index coupling ``Σᵢ wᵢ ‖(Mxᵢ, Mvᵢ) − (yᵢ, wᵢ)‖`` (an upper bound, the one the proof of
   Theorem 4.3 uses) and the uniform error ``E(t) = max`` over the ``2N`` variables of
   Theorem 3.1 (eq. (3.7), label ``eq:unifstab2``).
@@ -20,10 +23,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._rng import member_seed
+from .._validate import as_int
 from ..errors import InvalidInput, TooLarge
 from ._solution import KineticSolution, ReducedSolution
 
-__all__ = ["Comparison", "ReferenceEstimate", "compare", "reference_estimate", "milling_index"]
+__all__ = ["Comparison", "ReferenceEstimate", "compare", "reference_estimate", "milling_index",
+           "MAX_POT_ATOMS"]
+
+#: Atom counts above which :func:`compare` solves no linear program (POT) and reports the
+#: certified bracket of :func:`kinred.distance.paired_w1_bracket` instead (the exact LP and
+#: the general bracket of :func:`kinred.distance.w1` cost minutes per saved time there).
+MAX_POT_ATOMS = 100_000
 
 
 @dataclass(frozen=True)
@@ -44,7 +55,8 @@ class Comparison:
     uniform : (T,) ndarray
         ``E(t) = maxᵢ max(‖Mxᵢ − yᵢ‖, ‖Mvᵢ − wᵢ‖)`` (Theorem 3.1).
     method : str
-        W1 method used (``"exact"``, ``"exact-lazy"`` or ``"bracket"``).
+        W1 method used (``"exact"``, ``"exact-lazy"``, ``"bracket"``, or
+        ``"paired-bracket"`` above :data:`MAX_POT_ATOMS` atoms).
     k : int
     """
 
@@ -77,11 +89,34 @@ def _w1_atoms(A, B, wa, wb):
         return w1(A, B, method="bracket", a=wa, b=wb)
 
 
-def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:
-    r"""``W1(M#μᴺ(t), νᴺ(t))`` at every saved time (exact, POT).
+def _paired_bracket(A, B, w, seed):
+    """``kinred.distance.paired_w1_bracket`` (imported lazily, as in ``_w1_atoms``)."""
+    from ..distance import paired_w1_bracket as bracket
+
+    return bracket(A, B, w, seed=seed)
+
+
+def compare(solution: KineticSolution, reduced: ReducedSolution, *,
+            max_pot_atoms: int = MAX_POT_ATOMS, seed=0) -> Comparison:
+    r"""``W1(M#μᴺ(t), νᴺ(t))`` at every saved time (exact with POT up to ``max_pot_atoms``).
 
     .. math:: W_1\bigl((\mu^N(t))_M, \nu^N(t)\bigr) \le \sum_i w_i
               \bigl\|(Mx_i(t) - y_i(t),\, Mv_i(t) - w_i(t))\bigr\|
+
+    Parameters
+    ----------
+    solution : KineticSolution
+    reduced : ReducedSolution
+        ``reduce(solution, ...)``: the same atoms and weights.
+    max_pot_atoms : int
+        Above this many atoms no linear program is solved: each time gets the certified
+        bracket of :func:`kinred.distance.paired_w1_bracket` (``method="paired-bracket"``).
+    seed : int
+        Seed of the bracket's random directions (time ``i`` uses ``member_seed(seed, i)``).
+
+    Returns
+    -------
+    Comparison
 
     Examples
     --------
@@ -98,9 +133,15 @@ def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:
         raise InvalidInput("compare needs a KineticSolution and its ReducedSolution")
     if not np.array_equal(solution.t, reduced.t) or solution.x.shape[1] != reduced.y.shape[1]:
         raise InvalidInput("solution and reduced must share save times and atoms (use reduce(solution, ...))")
+    max_pot_atoms = as_int(max_pot_atoms, "max_pot_atoms", low=0)
+    seed = as_int(seed, "seed", low=0)
     P = reduced.projection
     T = len(solution.t)
     w = solution.weights
+    paired = solution.x.shape[1] > max_pot_atoms
+    if paired and not np.array_equal(w, reduced.weights):
+        raise InvalidInput("solution and reduced must carry the same atom weights (use "
+                           "reduce(solution, ...)); the paired bracket couples atom i with atom i")
     vals, ex, lo, hi, cpl, uni = (np.empty(T) for _ in range(6))
     ex = np.zeros(T, bool)
     method = ""
@@ -108,7 +149,10 @@ def compare(solution: KineticSolution, reduced: ReducedSolution) -> Comparison:
         Mx, Mv = P.apply(solution.x[i]), P.apply(solution.v[i])
         A = np.concatenate([Mx, Mv], axis=1)
         B = np.concatenate([reduced.y[i], reduced.w[i]], axis=1)
-        r = _w1_atoms(A, B, w, reduced.weights)
+        if paired:
+            r = _paired_bracket(A, B, w, seed=member_seed(seed, i))
+        else:
+            r = _w1_atoms(A, B, w, reduced.weights)
         vals[i], ex[i], lo[i], hi[i] = r.value, r.exact, r.lower, r.upper
         method = r.method
         ex_ = _row_norms(Mx - reduced.y[i])

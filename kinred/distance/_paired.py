@@ -1,0 +1,234 @@
+r"""A certified W1 bracket for two atomic measures whose atoms correspond, in ``O(N log N)``.
+
+Two measures ``μ = Σᵢ wᵢ δ_{aᵢ}`` and ``ν = Σᵢ wᵢ δ_{bᵢ}`` with the same weights and atoms
+paired by index (a particle solution and its reduction or projection, two runs of one
+system) have W1 (eq. (4.5) of the paper, label ``wasserstein``) bracketed by
+
+* **lower**: ``max_θ W1(θ#μ, θ#ν)`` over unit directions θ — each projection ``x ↦ θ·x`` is
+  1-Lipschitz, so each 1-D W1 is a Kantorovich–Rubinstein lower bound; the 1-D W1 is exact,
+  ``∫ |F_θ#μ − F_θ#ν|`` from one sort of the ``2N`` projected values;
+* **upper**: the cost of the index coupling ``Σᵢ wᵢ ‖aᵢ − bᵢ‖`` (an explicit coupling, the
+  one the proof of Theorem 4.3 uses).
+
+Both are ``O(N log N)`` per direction with ``O(N d)`` memory, and no LP is solved (no POT).
+Round-off is accounted for: the ends are moved outwards by a priori bounds of the
+floating-point errors of the sums (``γₙ = n u/(1 − n u)``), so the bracket holds for the
+exact W1 of the given atoms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._rng import as_generator
+from .._validate import as_array, as_int, as_weights
+from ..errors import InvalidInput
+from ._inputs import Pts, normalize_pair
+from ._result import W1Result
+
+__all__ = ["W1Bracket", "paired_w1_bracket", "MAX_AXES"]
+
+#: Coordinate axes tried at most (those with the largest mean ``|aᵢ − bᵢ|`` per coordinate).
+MAX_AXES = 64
+
+_U = np.finfo(np.float64).eps / 2
+
+
+def _gamma(n: int) -> float:
+    """``γₙ = n u / (1 − n u)``, the relative error bound of ``n`` floating-point operations."""
+    return n * _U / (1.0 - n * _U)
+
+
+@dataclass(frozen=True)
+class W1Bracket(W1Result):
+    """A certified bracket ``lower ≤ W1 ≤ upper`` (a :class:`W1Result` with labels).
+
+    Attributes
+    ----------
+    lower_from, upper_from : str
+        What gave each end (``"max-sliced W1 over 41 directions"``, ``"index coupling
+        sum_i w_i |a_i - b_i|"``).
+    n_directions : int
+        Directions whose exact 1-D W1 was computed.
+    label : str
+        ``"certified bracket"``.
+
+    Other attributes as in :class:`W1Result` (``value`` is the midpoint, ``method`` is
+    ``"paired-bracket"``, ``width = upper − lower``).
+    """
+
+    lower_from: str = ""
+    upper_from: str = ""
+    n_directions: int = 0
+    label: str = "certified bracket"
+
+
+def _slice(A: np.ndarray, B: np.ndarray, w: np.ndarray, theta: np.ndarray, proj_err: float,
+           grad: bool = False):
+    """A certified lower bound of the exact 1-D W1 of ``θ#μ`` and ``θ#ν`` and, with ``grad``,
+    the ascent direction ``g`` of the monotone coupling.
+
+    ``W1 = ∫|F − G| = Σₖ |Cₖ| (z₍ₖ₊₁₎ − z₍ₖ₎)`` over the merged sorted projected values ``z``
+    with ``C`` the running sum of ``+w`` (atoms of ``μ``) and ``−w`` (of ``ν``); ties may sit in
+    any order (their gaps are 0), so one unstable sort suffices.
+
+    ``g = Σ_π π_{ij} sign(θ·(aᵢ − bⱼ)) (aᵢ − bⱼ)`` over the monotone (optimal) coupling ``π`` of
+    the projections, so that ``θ·g = W1(θ)``: the atom of ``μ`` at sorted position ``k`` (mass
+    ``w``, running sums ``C₋ = Cₖ₋₁`` before and ``C₊ = Cₖ`` after it) is coupled above
+    itself with mass ``clip(−C₋, 0, w)`` and below with ``clip(C₊, 0, w)``; an atom of ``ν``
+    with ``clip(−C₊, 0, w)`` and ``clip(C₋, 0, w)``. The step ``θ ← g/|g|`` is the fixed-point
+    ascent of ``kinred.distance._bracket.projection_lower`` (a heuristic: every tried
+    direction's certified value counts, none is assumed).
+
+    Round-off subtracted: the summation error (``|Ĉₖ − Cₖ| ≤ 2γ₂ₙ``, hence ``2γ₂ₙ·span``,
+    plus ``γ_{2n+d+6}`` relative for the products, the sum and ``‖θ̂‖ ≠ 1``) and
+    ``2·proj_err``, twice a bound of the error of each computed projection (moving every atom
+    by ``δ`` moves W1 by at most ``2δ``).
+    """
+    n, d = A.shape
+    z = np.concatenate([A @ theta, B @ theta])
+    order = np.argsort(z)
+    zs = np.sort(z)             # = z[order] (ties are equal values), without a random gather
+    sw = np.concatenate([w, -w])[order]
+    C = np.cumsum(sw)
+    val = float(np.abs(C[:-1]) @ np.diff(zs))
+    err = 2.0 * _gamma(2 * n) * float(zs[-1] - zs[0]) + 2.0 * proj_err
+    cert = max(0.0, val * (1.0 - _gamma(2 * n + d + 6)) - err)
+    if not grad:
+        return cert, None
+    m = np.abs(sw)
+    before = np.concatenate([[0.0], C[:-1]])
+    mu = sw > 0
+    coef = np.where(mu, np.clip(-before, 0, m) - np.clip(C, 0, m),
+                    np.clip(C, -m, 0) + np.clip(before, 0, m))
+    full = np.empty(2 * n)
+    full[order] = coef
+    return cert, full[:n] @ A + full[n:] @ B
+
+
+def _unit(theta: np.ndarray) -> np.ndarray | None:
+    nrm = float(np.linalg.norm(theta))
+    return theta / nrm if nrm > 0 and np.isfinite(nrm) else None
+
+
+def _candidates(D: np.ndarray, w: np.ndarray, rng, n_random: int, n_principal: int) -> list:
+    """Directions: coordinate axes (at most :data:`MAX_AXES`), the mean difference, the
+    principal directions of the difference cloud ``D = A − B`` (top eigenvectors of
+    ``Σᵢ wᵢ dᵢ dᵢᵀ``) and ``n_random`` uniformly random ones."""
+    n, d = D.shape
+    axes = np.argsort(-(w @ np.abs(D)), kind="stable")[:MAX_AXES]
+    cands = [np.eye(1, d, int(k))[0] for k in axes]
+    cands.append(w @ D)
+    if n_principal:
+        r = min(n_principal, d)
+        if d <= 256:
+            M = D.T @ (w[:, None] * D)
+            vals, vecs = np.linalg.eigh(0.5 * (M + M.T))
+            cands.extend(vecs[:, ::-1][:, :r].T)
+        else:                               # subspace iteration, O(N d r) per sweep
+            Q = np.linalg.qr(rng.standard_normal((d, r)))[0]
+            for _ in range(12):
+                Q = np.linalg.qr(D.T @ (w[:, None] * (D @ Q)))[0]
+            cands.extend(Q.T)
+    cands.extend(rng.standard_normal((n_random, d)))
+    return [u for u in (_unit(c) for c in cands) if u is not None]
+
+
+def _lower(PA: Pts, PB: Pts, D: np.ndarray, rng, n_random: int, n_principal: int,
+           n_refine: int) -> tuple[float, int, str]:
+    """Max-sliced lower bound: every candidate scored, the best two refined by the
+    fixed-point ascent ``θ ← g/|g|`` of :func:`_slice` (while it increases)."""
+    A, B, w = PA.points, PB.points, PA.weights
+    d = PA.dim
+    # |computed θ·x − θ·x| <= γ_d Σ_l |θ_l x_l| <= γ_d √d max|x_l|  (|θ| = 1)
+    err = _gamma(d + 2) * np.sqrt(d) * float(max(np.max(np.abs(A)), np.max(np.abs(B))))
+    scored = sorted(((_slice(A, B, w, th, err)[0], i, th) for i, th in
+                     enumerate(_candidates(D, w, rng, n_random, n_principal))),
+                    key=lambda s: (-s[0], s[1]))
+    tried = len(scored)
+    best = scored[0][0]
+    for _, _, th in scored[:2] if n_refine else ():
+        val, g = _slice(A, B, w, th, err, grad=True)
+        for _ in range(n_refine):
+            nxt = _unit(g)
+            if nxt is None:
+                break
+            v2, g = _slice(A, B, w, nxt, err, grad=True)
+            tried += 1
+            best = max(best, v2)
+            if v2 <= val * (1 + 1e-12):
+                break
+            val = v2
+    return best, tried, f"max-sliced W1 over {tried} directions"
+
+
+def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal: int = 3,
+                      n_refine: int = 4, seed=0) -> W1Bracket:
+    r"""Certified ``lower ≤ W1(μ, ν) ≤ upper`` for ``μ = Σᵢ wᵢ δ_{aᵢ}``, ``ν = Σᵢ wᵢ δ_{bᵢ}``.
+
+    For two atomic measures with the same atom count and weights whose atoms correspond (a
+    particle solution and its projection or reduction): lower bound the largest exact 1-D W1
+    of the projections on the coordinate axes (at most :data:`MAX_AXES`), the mean
+    difference, the principal directions of the differences ``aᵢ − bᵢ`` and
+    ``n_directions`` random unit vectors (the best two then refined by fixed-point ascent);
+    upper bound the index coupling ``Σᵢ wᵢ‖aᵢ − bᵢ‖``. ``O((directions)·N log N)`` time,
+    ``O(N d)`` memory, no linear program (no POT), certified including floating-point
+    round-off.
+
+    Parameters
+    ----------
+    a, b : (N, d) array_like
+        The paired atoms (row ``i`` of ``a`` corresponds to row ``i`` of ``b``).
+    weights : (N,) array_like, optional
+        Common probability weights (uniform by default).
+    n_directions : int
+        Random unit directions (``>= 0``).
+    n_principal : int
+        Principal directions of the difference cloud (``>= 0``).
+    n_refine : int
+        Ascent steps for each of the two best directions (``>= 0``).
+    seed : None, int, SeedSequence or Generator
+        For the random directions (the bracket is certified whatever they are).
+
+    Returns
+    -------
+    W1Bracket
+        ``lower``, ``upper``, ``width``, ``value`` (midpoint), ``method="paired-bracket"``,
+        ``lower_from``/``upper_from`` and ``label``; ``exact`` is False.
+
+    Raises
+    ------
+    InvalidInput
+        Non-finite or mismatched arrays, bad weights or counts.
+
+    Examples
+    --------
+    >>> a = np.random.default_rng(0).normal(size=(500, 3))
+    >>> r = paired_w1_bracket(a, a + [0.0, 3.0, 4.0])     # a translation: W1 = 5
+    >>> bool(r.lower <= 5.0 <= r.upper), r.width < 1e-9, r.label
+    (True, True, 'certified bracket')
+    """
+    A = as_array(a, "a", ndim=2)
+    B = as_array(b, "b", ndim=2)
+    if A.shape != B.shape or A.shape[0] < 1 or A.shape[1] < 1:
+        raise InvalidInput(f"a and b must be paired atoms of the same shape (N, d) with N, d >= 1;"
+                           f" got {A.shape} and {B.shape}")
+    w = as_weights(weights, "weights", A.shape[0])
+    n_directions = as_int(n_directions, "n_directions", low=0)
+    n_principal = as_int(n_principal, "n_principal", low=0)
+    n_refine = as_int(n_refine, "n_refine", low=0)
+    rng = as_generator(seed)
+    PA, PB, unit = normalize_pair(A, B, w, w)
+    n, d = A.shape
+    D = PA.points - PB.points
+    upper = float(w @ np.hypot.reduce(D, axis=1)) * (1 + _gamma(n + d + 4)) * unit
+    lower, tried, lower_from = _lower(PA, PB, D, rng, n_directions, n_principal, n_refine)
+    lower = min(lower * unit, upper)
+    upper_from = "index coupling sum_i w_i |a_i - b_i|"
+    note = (f"certified bracket: lower bound from the {lower_from}, upper bound from the "
+            f"{upper_from}; no linear program solved")
+    return W1Bracket(0.5 * (lower + upper), "paired-bracket", False, lower, upper, (n, n), note,
+                     "euclidean", lower_from=lower_from, upper_from=upper_from,
+                     n_directions=tried)
