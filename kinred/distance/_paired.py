@@ -114,7 +114,7 @@ def _unit(theta: np.ndarray) -> np.ndarray | None:
 
 
 def _candidates(D: np.ndarray, w: np.ndarray, rng, n_random: int, n_principal: int) -> list:
-    """Directions: coordinate axes (at most :data:`MAX_AXES`), the mean difference, the
+    """Directions: coordinate axes (at most 64, ``MAX_AXES``), the mean difference, the
     principal directions of the difference cloud ``D = A − B`` (top eigenvectors of
     ``Σᵢ wᵢ dᵢ dᵢᵀ``) and ``n_random`` uniformly random ones."""
     n, d = D.shape
@@ -170,7 +170,7 @@ def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal
 
     For two atomic measures with the same atom count and weights whose atoms correspond (a
     particle solution and its projection or reduction): lower bound the largest exact 1-D W1
-    of the projections on the coordinate axes (at most :data:`MAX_AXES`), the mean
+    of the projections on the coordinate axes (at most 64, ``MAX_AXES``), the mean
     difference, the principal directions of the differences ``aᵢ − bᵢ`` and
     ``n_directions`` random unit vectors (the best two then refined by fixed-point ascent);
     upper bound the index coupling ``Σᵢ wᵢ‖aᵢ − bᵢ‖``. ``O((directions)·N log N)`` time,
