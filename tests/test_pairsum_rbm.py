@@ -8,7 +8,7 @@ import pytest
 
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Morse,
                              Quadratic, Scene, SelfPropulsion)
-from kinred.dynamics._threads import num_threads
+from kinred._parallel import num_threads
 from kinred.errors import InvalidInput, KinredError
 from kinred.pairsum import Dense, RandomBatch, as_pairsum
 from kinred.pairsum import _rbm_kernels

@@ -66,7 +66,7 @@ from functools import partial
 import numpy as np
 
 from .._validate import as_int
-from ..dynamics import _threads
+from .. import _parallel
 from ..errors import InvalidInput
 from . import _rbm_kernels
 from ._base import PairTerms, check_plan_args
@@ -185,7 +185,7 @@ class RandomBatch:
         per = max(1, self.block // (p * (p - 1) // 2))
         nbt = -(-n // p)
         chunks = tuple((b0, min(b0 + per, nbt)) for b0 in range(0, nbt, per))
-        nthreads = max(1, min(_threads.get_num_threads(), len(chunks)))
+        nthreads = max(1, min(_parallel.get_num_threads(), len(chunks)))
         groups = tuple(tuple(g) for g in _split(chunks, nthreads))
         return RandomBatchPlan(
             n=n, dim=dim, p=p, terms=terms, q=q, cs=scene.coefficients(n) / q, chunks=chunks,
@@ -218,7 +218,7 @@ class RandomBatch:
         state = {"x": np.ascontiguousarray(x, dtype=np.float64),
                  "v": None if v is None else np.ascontiguousarray(v, dtype=np.float64)}
         outs = {tgt: np.zeros((plan.n, plan.dim)) for tgt in plan.targets}
-        _threads.run_parallel(partial(_share, plan, state, perm, outs), list(plan.groups))
+        _parallel.run_parallel(partial(_share, plan, state, perm, outs), list(plan.groups))
         return outs
 
 
