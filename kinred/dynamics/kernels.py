@@ -6,7 +6,10 @@ distances). Built-in kernels also provide
 * ``value_sq(q, out)`` – the fast path: ``φ(√q)`` from squared distances ``q`` into ``out``
   (``out`` may be ``q``), with numpy ufuncs on preallocated blocks;
 * ``sup_norm()`` and ``lipschitz()`` – ``‖φ‖∞`` and ``‖φ′‖∞`` on ``[0, ∞)``, the constants that
-  enter the bounds (1.2)–(1.4) of the paper (labels ``eq:condf1``–``eq:condf3``).
+  enter the bounds (1.2)–(1.4) of the paper (labels ``eq:condf1``–``eq:condf3``);
+* ``slope_bound(lo, hi)`` – elementwise an upper bound of ``sup |φ′|`` over ``[lo, hi]``
+  (vectorized; exact for Cucker–Smale and Quadratic), the localized Lipschitz constant of the
+  mean-value theorem used by the certificates of :mod:`kinred.certify`.
 
 * ``compiled_form()`` – the kernel hook for compiled code: None, or ``(kind, a, b)`` naming
   a closed form of :data:`kinred.pairsum.COMPILED_KINDS` that equals the kernel (Cucker–Smale:
@@ -29,9 +32,31 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .._validate import as_float
+from ..errors import InvalidInput
 from ..pairsum import _kernels
 
 __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
+
+
+def _interval(lo, hi):
+    """Validated, broadcast interval ends ``0 <= lo <= hi`` (``hi`` may be ``+inf``)."""
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    try:
+        lo, hi = np.broadcast_arrays(lo, hi)
+    except ValueError:
+        raise InvalidInput(f"lo and hi must broadcast together, got shapes {np.shape(lo)} and "
+                           f"{np.shape(hi)}") from None
+    if lo.size:
+        if np.isnan(lo).any() or np.isnan(hi).any() or np.isinf(lo).any():
+            raise InvalidInput("lo must be finite and hi must not be NaN (hi may be +inf)")
+        if np.min(lo) < 0.0:
+            raise InvalidInput(f"lo must be >= 0 (distances), got {float(np.min(lo))!r}")
+        if np.any(hi < lo):
+            i = np.flatnonzero((hi < lo).ravel())[0]
+            raise InvalidInput(f"hi must be >= lo elementwise, got lo={lo.ravel()[i]!r} > "
+                               f"hi={hi.ravel()[i]!r}")
+    return lo, hi
 
 
 @runtime_checkable
@@ -136,6 +161,40 @@ class CuckerSmale:
             return 0.0
         s = 1.0 / math.sqrt(2.0 * b + 1.0)
         return 2.0 * self.G * b * s * math.exp(-(b + 1.0) * math.log1p(s * s))
+
+    def slope(self, s):
+        r"""``|g′(s)| = 2Gβ s (1 + s²)^{−β−1}`` elementwise (0 at ``s = ∞``)."""
+        s = np.asarray(s, dtype=float)
+        if self.beta == 0.0 or self.G == 0.0:
+            return np.zeros(s.shape)
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = 2.0 * self.G * self.beta * s * np.exp(-(self.beta + 1.0) * np.log1p(s * s))
+        return np.where(np.isfinite(s), out, 0.0)
+
+    def slope_bound(self, lo, hi):
+        r"""``sup_{s∈[lo, hi]} |g′(s)|`` elementwise (exact).
+
+        ``|g′(s)| = 2Gβ s (1+s²)^{−β−1}`` is unimodal with its peak at ``s* = 1/√(2β+1)``
+        (its derivative has the sign of ``1 − (2β+1)s²``), so the supremum is the peak when
+        ``lo ≤ s* ≤ hi`` and the larger end value otherwise.
+
+        Parameters
+        ----------
+        lo, hi : array_like
+            Interval ends, ``0 <= lo <= hi`` (``hi`` may be ``inf``), broadcast together.
+
+        Examples
+        --------
+        >>> g = CuckerSmale(G=1.0, beta=1.0)           # peak at s* = 1/√3
+        >>> [round(float(v), 6) for v in g.slope_bound([0.0, 2.0], [1.0, 3.0])]
+        [0.649519, 0.16]
+        """
+        lo, hi = _interval(lo, hi)
+        if self.beta == 0.0 or self.G == 0.0:
+            return np.zeros(lo.shape)
+        s_star = 1.0 / math.sqrt(2.0 * self.beta + 1.0)
+        out = np.maximum(self.slope(lo), self.slope(hi))
+        return np.where((lo <= s_star) & (hi >= s_star), self.lipschitz(), out)
 
     def __repr__(self) -> str:
         return f"CuckerSmale(G={self.G!r}, beta={self.beta!r})"
@@ -242,6 +301,60 @@ class Morse:
               + self.Cr / self.lr ** 2 * np.exp(-r / self.lr))
         return (d2 / r - self.dU(r) / r ** 2) * s / r
 
+    def _envelopes(self, r):
+        r"""``(P_a(r), P_r(r))``: the positive, decreasing parts of ``g′(r) = P_r(r) − P_a(r)``
+        for ``g(r) = U′(r)/r``: ``P_a = (C_a/ℓ_a) e^{−r/ℓ_a}(1/(ℓ_a r) + 1/r²)``, likewise
+        ``P_r`` with ``C_r, ℓ_r`` (0 at ``r = ∞``)."""
+        r = np.asarray(r, dtype=float)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            inv = 1.0 / r
+            pa = self.Ca / self.la * np.exp(-r / self.la) * (inv / self.la + inv * inv)
+            pr = self.Cr / self.lr * np.exp(-r / self.lr) * (inv / self.lr + inv * inv)
+        fin = np.isfinite(r)
+        return np.where(fin, pa, 0.0), np.where(fin, pr, 0.0)
+
+    def slope_bound(self, lo, hi):
+        r"""An upper bound of ``sup_{s∈[lo, hi]} |u′(s)|`` elementwise (softened potential only).
+
+        With ``r = √(s² + soft²)`` and ``g(r) = U′(r)/r``, ``u′(s) = g′(r)·s/r`` and
+
+        .. math:: g'(r) = P_r(r) - P_a(r), \quad
+                  P_a(r) = \tfrac{C_a}{\ell_a} e^{-r/\ell_a}\bigl(\tfrac{1}{\ell_a r} + \tfrac{1}{r^2}\bigr),
+                  \quad P_r \text{ likewise},
+
+        both ``P`` positive and decreasing, so on ``r ∈ [r_lo, r_hi]``
+        ``g′ ∈ [P_r(r_hi) − P_a(r_lo), P_r(r_lo) − P_a(r_hi)]``; ``s/r`` increases with ``s``.
+        Hence ``|u′| ≤ max(|P_r(r_hi) − P_a(r_lo)|, |P_r(r_lo) − P_a(r_hi)|)·hi/r_hi``, which
+        tends to ``|u′(s)|`` as the interval shrinks to ``s``.
+
+        Raises
+        ------
+        InvalidInput
+            For ``soft = 0``: ``u(s) = U′(s)/s`` is unbounded near ``s = 0`` (and set to 0 at
+            ``s = 0``), so no slope bound exists on intervals reaching 0.
+
+        Examples
+        --------
+        >>> m = Morse(1.0, 2.0, 1.5, 0.5, soft=0.5)
+        >>> s = np.linspace(1.0, 1.01, 101)
+        >>> bool(m.slope_bound(1.0, 1.01) >= np.max(np.abs(m._du_ds(s))))
+        True
+        """
+        if not self.soft:
+            raise InvalidInput(
+                f"{self!r}: slope_bound needs soft > 0: with soft = 0, u(s) = U'(s)/s is unbounded "
+                "near s = 0 (coincident agents), so no Lipschitz bound exists; use Morse(..., soft=eps)")
+        lo, hi = _interval(lo, hi)
+        e2 = self.soft * self.soft
+        r_lo = np.sqrt(lo * lo + e2)
+        r_hi = np.sqrt(hi * hi + e2)
+        pa_lo, pr_lo = self._envelopes(r_lo)
+        pa_hi, pr_hi = self._envelopes(r_hi)
+        g1 = np.maximum(np.abs(pr_hi - pa_lo), np.abs(pr_lo - pa_hi))
+        with np.errstate(invalid="ignore"):
+            frac = np.where(np.isfinite(hi), hi / r_hi, 1.0)
+        return g1 * frac
+
     def sup_norm(self) -> float:
         """``‖u‖∞`` (``inf`` when ``soft = 0`` and ``U′(0) ≠ 0``), by a bracketed 1-D maximization."""
         if not self.soft and self.Ca / self.la != self.Cr / self.lr:
@@ -286,6 +399,17 @@ class Quadratic:
 
     def lipschitz(self) -> float:
         return 0.0
+
+    def slope_bound(self, lo, hi):
+        """``sup |u′| = 0`` on every interval (``u`` is constant).
+
+        Examples
+        --------
+        >>> Quadratic(2.0).slope_bound([0.0, 1.0], [1.0, 5.0])
+        array([0., 0.])
+        """
+        lo, hi = _interval(lo, hi)
+        return np.zeros(lo.shape)
 
     def __repr__(self) -> str:
         return f"Quadratic(c={self.c!r})"
