@@ -1,0 +1,468 @@
+r"""The per-step machinery of a certificate, as an observer of the high-dimensional run.
+
+:class:`CertificateObserver` is fed the high-dimensional Euler state after every accepted step
+(``observer(t, state, scene)``, ``state`` with ``.x``, ``.v`` in the integrator's working
+coordinates – positions possibly relative to ``state.shift`` – and ``.step``, ``.dt``). It
+steps the projected scene in lockstep (the same floating-point operations as
+:func:`kinred.integrate.simulate`'s Euler path, so that the projected run is bit-identical to
+``simulate(scene.project(M), *project_state(M, x0, v0))``) and propagates the bounds of
+``docs/certificates.md``:
+
+* the defects ``τₓ = PX⁺ − PX − h PV`` and ``τᵥ = PV⁺ − PV − h F′(PX, PV)`` of the projected
+  high-dimensional trajectory ``(PX, PV) = (M x, M v)`` in the projected Euler scheme (one
+  evaluation of the projected scene's own field per step), kept as vectors;
+* the stability of the projected Euler map between ``(PX, PV)`` and the projected run
+  ``(Y, W)``, from one pair pass (:mod:`kinred.certify._aggregates`);
+* a weighted-RMS recursion (mean and fluctuation parts) and a per-agent (ℓ∞) recursion,
+  each capped by the other after every step.
+
+The recursion never uses the measured error: errors are measured at the saved steps only, to
+be reported beside the bounds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import observables as _obs
+from .._validate import as_choice
+from ..dynamics import Scene, _threads
+from ..errors import InvalidInput, SimulationDiverged
+from ..projection import as_projection
+from . import _roundoff as _ro
+from ._aggregates import pair_pass, pair_pass_numpy
+from ._paper import PaperTracker
+from ._plan import make_plan
+
+__all__ = ["CertificateObserver", "StepState"]
+
+
+class StepState:
+    """What an observer sees after a step (the integrator's working state).
+
+    Attributes
+    ----------
+    x, v : (N, d) ndarray
+        Positions (relative to ``shift`` when it is not None) and velocities.
+    shift : (d,) ndarray or None
+        Constant added to ``x`` to get absolute positions.
+    step : int
+        Number of accepted steps so far.
+    dt : float
+        Step size.
+    """
+
+    __slots__ = ("x", "v", "shift", "step", "dt")
+
+    def __init__(self, x, v, shift, step, dt):
+        self.x, self.v, self.shift, self.step, self.dt = x, v, shift, step, dt
+
+
+def _wnorm(A: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    """``(|Σᵢ wᵢ Aᵢ|, (Σᵢ wᵢ |Aᵢ − Ā|²)^{1/2})``: weighted mean size and fluctuation norm."""
+    m = w @ A
+    dev = A - m
+    dev -= w @ dev
+    return float(np.sqrt(m @ m)), float(np.sqrt(w @ np.einsum("ij,ij->i", dev, dev)))
+
+
+def _project(P, X: np.ndarray) -> np.ndarray:
+    """``P.apply(X)`` by row blocks on the engine's threads, BLAS single-threaded (outside
+    the engine's parallel regions a multithreaded BLAS contends with the engine's pool)."""
+    n = X.shape[0]
+    nt = min(_threads.get_num_threads(), max(1, n * X.shape[1] * P.k // 2_000_000))
+    if nt <= 1:
+        with _threads.blas_threads(1):
+            return P.apply(X)
+    out = np.empty((n, P.k))
+    cuts = np.linspace(0, n, nt + 1).astype(int)
+
+    def work(g, rows):
+        out[rows[0]:rows[1]] = P.apply(X[rows[0]:rows[1]])
+
+    _threads.run_parallel(work, [(cuts[g], cuts[g + 1]) for g in range(nt)])
+    return out
+
+
+def _rows(A: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("ij,ij->i", A, A))
+
+
+def _segment_min(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Per row, the distance from 0 to the segment ``[Pᵢ, Qᵢ]``."""
+    D = Q - P
+    dd = np.einsum("ij,ij->i", D, D)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(dd > 0, -np.einsum("ij,ij->i", P, D) / dd, 0.0)
+    s = np.clip(s, 0.0, 1.0)
+    return _rows(P + s[:, None] * D)
+
+
+class CertificateObserver:
+    """Certificate of a projected run, fed the high-dimensional Euler steps.
+
+    Parameters
+    ----------
+    scene : Scene
+        The high-dimensional scene (second order, deterministic, covered effects only).
+    M : (k, d) ndarray or Projection
+    save_steps : array_like of int, optional
+        Step indices at which to record (default: every step).
+    engine : {"fast", "numpy"}
+        Pair pass: compiled kernels or the plain-numpy twin.
+    paper : bool
+        Also evaluate the paper's a-priori bounds (eq. (2.11) and (2.18)) at the saved steps
+        (one high-dimensional pair pass per saved step).
+
+    Notes
+    -----
+    Call :meth:`init` with the initial working state and the absolute initial data, then the
+    observer itself after every accepted step, then :meth:`records`.
+    """
+
+    def __init__(self, scene, M, *, save_steps=None, engine: str = "fast", paper: bool = True):
+        if not isinstance(scene, Scene):
+            raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self.P = as_projection(M)
+        self.engine = as_choice(engine, "engine", ("fast", "numpy"))
+        self.save_steps = None if save_steps is None else {int(s) for s in save_steps}
+        self.paper = bool(paper)
+
+    # ------------------------------------------------------------------ set-up
+    def init(self, t0: float, state: StepState, x0: np.ndarray, v0: np.ndarray) -> None:
+        """Start from the working state ``state`` of the initial data ``(x0, v0)`` (absolute)."""
+        P, scene = self.P, self.scene
+        n, d = x0.shape
+        if P.d != d:
+            raise InvalidInput(f"M must map R^{d} (the scene's dimension), got shape {P.shape}")
+        self.plan = make_plan(scene, n)
+        self.pscene = scene.project(P)
+        self.w = scene.agent_weights(n)
+        self.c = scene.coefficients(n)
+        self.t0 = float(t0)
+        self.n, self.k = n, P.k
+        self.mixed = scene.precision == "mixed"
+        y0, w0 = P.apply(x0), P.apply(v0)
+        # the projected run, as simulate(pscene, y0, w0) starts it
+        self.shift_y = _obs.centre(y0, self.w) if self.pscene.translation_invariant else None
+        self.Y = y0 - self.shift_y if self.shift_y is not None else y0.copy()
+        self.W = w0.copy()
+        self.tmp = np.empty_like(self.Y)
+        # constant offset between the working frames: e = (Y − PX) + (c_y − M c_x)
+        pf = math.sqrt(float(np.sum(P.to_dense() ** 2)))     # ‖M‖_F ≥ ‖ |M| ‖₂
+        self.proj_round = _ro.gamma(d) * pf                   # |fl(M z) − M z| ≤ this·|z|
+        if state.shift is not None and self.shift_y is not None:
+            pc = P.apply(state.shift)
+            self.delta_c = self.shift_y - pc
+            self.rho_c = (self.proj_round * float(np.linalg.norm(state.shift))
+                          + 2 * _ro.U64 * (float(np.linalg.norm(self.shift_y)) + float(np.linalg.norm(pc))))
+        else:
+            self.delta_c = np.zeros(self.k)
+            self.rho_c = 0.0
+        self.PX = _project(P, state.x)
+        self.PV = _project(P, state.v)
+        e0 = self.Y - self.PX + self.delta_c
+        v0e = self.W - self.PV
+        u4 = 4.0 * _ro.U64
+        self.bx = _rows(e0) * (1 + u4) + self.rho_c
+        self.bv = _rows(v0e) * (1 + u4)
+        xm, xf = _wnorm(e0, self.w)
+        vm, vf = _wnorm(v0e, self.w)
+        self.fx = _rows(e0 - self.w @ e0) * (1 + u4) + 2 * u4 * self.bx.max(initial=0.0) + self.rho_c
+        self.fv = _rows(v0e - self.w @ v0e) * (1 + u4) + 2 * u4 * self.bv.max(initial=0.0)
+        self.saturated = False
+        nx = math.sqrt(float(self.w @ self.bx ** 2))
+        nv = math.sqrt(float(self.w @ self.bv ** 2))
+        self.L2 = [xm * (1 + u4) + self.rho_c + u4 * nx, xf * (1 + u4) + u4 * nx,
+                   vm * (1 + u4) + u4 * nv, vf * (1 + u4) + u4 * nv]
+        self.R2 = [0.0, 0.0, 0.0, 0.0]          # the round-off share of the L2 recursion
+        self.rec = {key: [] for key in ("t", "step", "error", "error_max", "bound", "bound_max",
+                                        "roundoff", "w1_bound", "w1_coupling", "saturated")}
+        self.tracker = PaperTracker(scene, P, self.plan, self.w) if self.paper else None
+        self._step = 0
+        if self._saving(0):
+            self._record(self.t0, state)
+
+    def _saving(self, step: int) -> bool:
+        return self.save_steps is None or step in self.save_steps
+
+    # ------------------------------------------------------------------ one step
+    def __call__(self, t, state: StepState, scene=None) -> None:
+        """Advance by one accepted high-dimensional step (``state`` after it)."""
+        self.update(t, state)
+
+    def update(self, t, state: StepState) -> None:
+        h = state.dt
+        n_prev = state.step - 1
+        if n_prev != self._step:
+            raise InvalidInput(f"observer fed step {state.step} after step {self._step}: every "
+                               "accepted step must be observed, in order")
+        tn = self.t0 + n_prev * h
+        PX, PV, Y, W = self.PX, self.PV, self.Y, self.W
+        _, Fd = self.pscene._rhs(PX, PV, tn)                    # the defect's projected field
+        dY, dW = self.pscene._rhs(Y, W, tn)                     # the projected step's field
+        aggs = self._pass(PX, PV, Y, W)
+        coef = self._coefficients(aggs, PV, W, h)
+        pre = self._allowance_inputs(aggs, PX, PV, Y, W, Fd, dW)
+        # the projected Euler step, exactly as simulate's (dY may be W itself: Y first)
+        np.multiply(dY, h, out=self.tmp)
+        Y += self.tmp
+        np.multiply(dW, h, out=self.tmp)
+        W += self.tmp
+        s = float(np.sum(Y)) + float(np.sum(W))
+        if not math.isfinite(s):
+            raise SimulationDiverged(
+                f"the projected run diverged at t={self.t0 + state.step * h:.6g} (step "
+                f"{state.step}): its state became non-finite; reduce dt", t=float(t),
+                step=int(state.step))
+        PXn = _project(self.P, state.x)
+        PVn = _project(self.P, state.v)
+        tau_x = PXn - PX - h * PV
+        tau_v = PVn - PV - h * Fd
+        alpha = _ro.step_allowance(h, Y1=_ro.row_max(Y), W1=_ro.row_max(W),
+                                   PX1=_ro.row_max(PXn), PV1=_ro.row_max(PVn), **pre)
+        self._advance(coef, aggs, tau_x, tau_v, alpha, h, self._sizes(Y, W, PXn, PVn))
+        self.PX, self.PV = PXn, PVn
+        self._step = state.step
+        if self._saving(state.step):
+            self._record(float(t), state)
+
+    def _sizes(self, Y, W, PX, PV) -> dict:
+        """The trivial bounds ``|y − Mx| ≤ |y| + |Mx|`` (per agent, of the fluctuations, of the
+        means and in the weighted RMS norm) from the sizes of the two states (docs §6)."""
+        w = self.w
+        g = 1.0 + 8.0 * _ro.U64
+        dc = float(np.linalg.norm(self.delta_c)) + self.rho_c
+        out = {}
+        for key, A, B, extra in (("x", Y, PX, dc), ("v", W, PV, 0.0)):
+            ma, mb = w @ A, w @ B
+            ra, rb = _rows(A), _rows(B)
+            fa, fb = _rows(A - ma), _rows(B - mb)
+            out["b" + key] = (ra + rb + extra) * g
+            out["f" + key] = (fa + fb) * g
+            out[key + "m"] = (float(np.linalg.norm(ma)) + float(np.linalg.norm(mb)) + extra) * g
+            out[key + "f"] = (math.sqrt(float(w @ fa ** 2)) + math.sqrt(float(w @ fb ** 2))) * g
+            out[key + "l2"] = (math.sqrt(float(w @ ra ** 2)) + math.sqrt(float(w @ rb ** 2))
+                               + extra) * g
+        return out
+
+    def _pass(self, PX, PV, Y, W):
+        pts = {"PX": PX, "PV": PV, "Y": Y, "W": W}
+        fn = pair_pass if self.engine == "fast" else pair_pass_numpy
+        if not self.plan.terms:
+            return []
+        bz = {"x": self.fx, "v": self.bv}
+        bs = {"x": self.fx, "v": self.fv}
+        return fn(pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
+                  _ro.pass_constants(self.n, self.mixed))
+
+    def _coefficients(self, aggs, PV, W, h) -> dict:
+        """Contraction and coupling factors of the projected Euler map (docs/certificates.md §3)."""
+        plan, n = self.plan, self.n
+        m = 1.0 + _ro.COEF_MARGIN
+        dsum_v = np.zeros(n)
+        dneg_v = np.zeros(n)
+        kstd = np.zeros(n)
+        lam2 = 0.0
+        have_v = False
+        A_lx = A_x = A_v = 0.0
+        for term, agg in zip(plan.terms, aggs):
+            if term.carrier == "v":
+                have_v = True
+                dsum_v += agg.dsum
+                dneg_v += agg.dneg
+                # κ·(weighted std of row i of φ): |Σⱼ aᵢⱼ ε̃ⱼ| ≤ this·‖ε̃‖_w (docs §5)
+                ks2 = plan.kappa * agg.s2
+                kstd += np.sqrt(np.maximum(ks2 - agg.dsum ** 2, 0.0)
+                                + _ro.gamma(2 * n + 8) * ks2)
+                # spectral gap >= κ Σᵢ wᵢ minⱼ φᵢⱼ (threshold decomposition, docs §2)
+                rm = np.where(np.isfinite(agg.rowmin), agg.rowmin, 0.0)
+                lam2 += plan.kappa * float(self.w @ rm)
+            else:
+                A_lx += float(np.max(np.abs(agg.dsum) + agg.dsum + 2.0 * agg.dneg))
+            if term.source == "x":
+                A_x += 2.0 * float(np.max(agg.kr))
+            else:
+                A_v += 2.0 * float(np.max(agg.kr))
+        lam2 *= 1.0 - _ro.COEF_MARGIN
+        if plan.has_sp:
+            a, b = plan.sp_a, plan.sp_b
+            big = np.maximum(_rows(PV), _rows(W))
+            small = _segment_min(PV, W)
+            base = 1.0 - h * dsum_v
+            p = np.maximum(np.abs(base + h * (a - b * small ** 2)),
+                           np.abs(base + h * (a - 3.0 * b * big ** 2)))
+            q = float(np.max(p)) + h * float(np.max(dsum_v + 2.0 * dneg_v))
+        else:
+            p = np.abs(1.0 - h * dsum_v)
+            if have_v:
+                rho_l = 2.0 * float(np.max(dsum_v + dneg_v)) * m
+                q = max(abs(1.0 - h * lam2), abs(1.0 - h * rho_l)) + 2.0 * h * float(np.max(dneg_v))
+            else:
+                q = 1.0
+        return {"q": q * m, "p": p * m, "A_lx": A_lx * m, "A_x": A_x * m, "A_v": A_v * m,
+                "kstd": kstd}
+
+    def _allowance_inputs(self, aggs, PX, PV, Y, W, Fd, dW) -> dict:
+        """Magnitudes at the start of the step for :func:`_roundoff.step_allowance`."""
+        plan = self.plan
+        spreads = {}
+        for term in plan.terms:
+            z_run, z_true = (Y, PX) if term.carrier == "x" else (W, PV)
+            spreads[("run", term.carrier)] = _ro.spread(z_run)
+            spreads[("true", term.carrier)] = _ro.spread(z_true)
+        W0, PV0, fd, dw = _ro.row_max(W), _ro.row_max(PV), _ro.row_max(Fd), _ro.row_max(dW)
+        speed = max(PV0, W0)
+        eng_run = _ro.field_rounding(plan, aggs, spreads, speed, self.n, self.k, dw, self.mixed,
+                                     "run")
+        eng_true = _ro.field_rounding(plan, aggs, spreads, speed, self.n, self.k, fd, self.mixed,
+                                      "true")
+        return dict(W0=W0, PX0=_ro.row_max(PX), PV0=PV0, dW=dw, Fd=fd, eng_run=eng_run,
+                    eng_true=eng_true)
+
+    def _advance(self, coef, aggs, tau_x, tau_v, alpha, h, sizes) -> None:
+        """One step of the recursions (docs/certificates.md §3–§5), then the caps."""
+        ax, av = alpha
+        w, plan, n = self.w, self.plan, self.n
+        sp = plan.has_sp
+        q = coef["q"]
+        m = 1.0 + _ro.COEF_MARGIN
+        bx, bv, fx, fv = self.bx, self.bv, self.fx, self.fv
+        xm, xf, vm, vf = self.L2
+        # per agent couplings (§2): |Rᵢ| ≤ Σⱼ Kᵢⱼ(fᵢ + fⱼ), |(L e)ᵢ| ≤ |dᵢ| fxᵢ + Σⱼ|aᵢⱼ| fxⱼ
+        lap_v = np.zeros(n)
+        lap_x = np.zeros(n)
+        r_x = np.zeros(n)
+        r_v = np.zeros(n)
+        for term, agg in zip(plan.terms, aggs):
+            if term.source == "x":
+                r_x += agg.kr * fx + agg.kmv
+            else:
+                r_v += agg.kr * fv + agg.kmv
+            if term.carrier == "v":
+                lap_v += agg.amv
+            else:
+                lap_x += np.abs(agg.dsum) * fx + agg.amv
+        lap_v *= m
+        lap_x *= m
+        r_x *= m
+        r_v *= m
+        mixed = lap_x + r_x + r_v           # mean-free inputs of the velocity error
+
+        def wn(a):
+            return math.sqrt(float(w @ (a * a)))
+
+        nlx, nrx, nrv = wn(lap_x), wn(r_x), wn(r_v)
+        txm, txf = _wnorm(tau_x, w)
+        tvm, tvf = _wnorm(tau_v, w)
+
+        def l2(S, inx_m, inx_f, inv_m, inv_f, ax_, av_, cap):
+            xm_, xf_, vm_, vf_ = S
+            if sp:
+                vf_, vm_ = math.hypot(vm_, vf_), 0.0
+            inf = math.inf
+            c = (min(coef["A_lx"] * xf_, nlx if cap else inf)
+                 + min(coef["A_x"] * xf_, nrx if cap else inf)
+                 + min(coef["A_v"] * vf_, nrv if cap else inf))
+            if sp:
+                return [xm_ + h * vf_ + inx_m + ax_, xf_ + h * vf_ + inx_f + ax_, 0.0,
+                        q * vf_ + h * c + math.hypot(inv_m, inv_f) + av_]
+            return [xm_ + h * vm_ + inx_m + ax_, xf_ + h * vf_ + inx_f + ax_,
+                    vm_ + inv_m + av_, q * vf_ + h * c + inv_f + av_]
+
+        X_m, X_f, V_m, V_f = l2(self.L2, txm, txf, tvm, tvf, ax, av, True)
+        self.R2 = l2(self.R2, 0.0, 0.0, 0.0, 0.0, ax, av, False)
+        # per agent, whole errors (§4) and fluctuations (§5)
+        tx_dev = tau_x - w @ tau_x
+        tv_dev = tau_v - w @ tau_v
+        nbx = bx + h * bv + _rows(tau_x) + ax
+        nfx = fx + h * fv + _rows(tx_dev) + 2.0 * ax
+        nbv = coef["p"] * bv + h * (lap_v + mixed) + _rows(tau_v) + av
+        if not sp:
+            nfv = coef["p"] * fv + h * (m * coef["kstd"] * vf + mixed) + _rows(tv_dev) + 2.0 * av
+        # the trivial size caps: |y − Mx| ≤ |y| + |Mx| (docs §6)
+        np.minimum(nbx, sizes["bx"], out=nbx)
+        np.minimum(nfx, sizes["fx"], out=nfx)
+        np.minimum(nbv, sizes["bv"], out=nbv)
+        before = math.hypot(math.hypot(X_m, X_f), math.hypot(V_m, V_f))
+        X_m, X_f = min(X_m, sizes["xm"]), min(X_f, sizes["xf"])
+        if sp:
+            V_f = min(V_f, sizes["vl2"])
+        else:
+            np.minimum(nfv, sizes["fv"], out=nfv)
+            V_m, V_f = min(V_m, sizes["vm"]), min(V_f, sizes["vf"])
+        # saturated: the size caps, not the recursion, decide the RMS bound
+        saturated = math.hypot(math.hypot(X_m, X_f), math.hypot(V_m, V_f)) < 0.99 * before
+        # each caps the others: ‖e‖_w ≤ ‖bx‖_w, |ẽᵢ| ≤ |eᵢ| + |ē|, |ẽᵢ| ≤ ‖ẽ‖_w/√wᵢ, ...
+        wbx, wfx, wbv = wn(nbx), wn(nfx), wn(nbv)
+        X_m, X_f = min(X_m, wbx), min(X_f, wfx, wbx)
+        if sp:
+            V_f = min(V_f, wbv)
+            nfv = nbv + V_f                  # |ε̃ᵢ| ≤ |εᵢ| + |ε̄| and |ε̄| ≤ ‖ε‖_w
+        else:
+            wfv = wn(nfv)
+            V_m, V_f = min(V_m, wbv), min(V_f, wfv, wbv)
+        pos = w > 0
+        inv = np.zeros(n)
+        inv[pos] = 1.0 / np.sqrt(w[pos])
+        np.minimum(nfx, nbx + X_m, out=nfx)
+        np.minimum(nfv, nbv + V_m + (V_f if sp else 0.0), out=nfv)
+        nfx[pos] = np.minimum(nfx[pos], X_f * inv[pos])
+        nfv[pos] = np.minimum(nfv[pos], V_f * inv[pos])
+        np.minimum(nbx, X_m + nfx, out=nbx)
+        if not sp:
+            np.minimum(nbv, V_m + nfv, out=nbv)
+        else:
+            nbv[pos] = np.minimum(nbv[pos], V_f * inv[pos])
+        L2 = [X_m, X_f, V_m, V_f]
+        if not (all(math.isfinite(s) for s in L2) and np.all(np.isfinite(nbx))
+                and np.all(np.isfinite(nbv))):
+            raise SimulationDiverged(
+                f"the certificate's bounds left the float64 range at step {self._step + 1} "
+                f"(|w_i| + |M v_i| up to {float(np.max(sizes['bv'])):.3g}): a run is blowing up "
+                "(explicit Euler unstable?); reduce dt", step=int(self._step + 1))
+        self.L2, self.bx, self.bv, self.fx, self.fv = L2, nbx, nbv, nfx, nfv
+        self.saturated = bool(saturated)
+
+    # ------------------------------------------------------------------ records
+    def _record(self, t: float, state: StepState) -> None:
+        P, w = self.P, self.w
+        e = (self.Y - self.PX) + self.delta_c
+        ev = self.W - self.PV
+        ex2 = np.einsum("ij,ij->i", e, e)
+        ev2 = np.einsum("ij,ij->i", ev, ev)
+        mu_x = self.proj_round * _ro.row_max(state.x) + self.rho_c
+        mu_v = self.proj_round * _ro.row_max(state.v)
+        grow = 1.0 + 4.0 * _ro.U64
+        l2 = math.sqrt(sum(s * s for s in self.L2))
+        l2 = min(l2, math.sqrt(float(w @ (self.bx ** 2 + self.bv ** 2))))
+        per = np.hypot(self.bx + mu_x, self.bv + mu_v) * grow
+        rec = self.rec
+        rec["t"].append(t)
+        rec["step"].append(self._step)
+        rec["error"].append(math.sqrt(float(w @ (ex2 + ev2))))
+        rec["error_max"].append(math.sqrt(float(np.max(ex2 + ev2))))
+        rec["bound"].append((l2 + math.hypot(mu_x, mu_v)) * grow)
+        rec["bound_max"].append(float(np.max(per)))
+        rec["roundoff"].append(math.sqrt(sum(s * s for s in self.R2)))
+        rec["saturated"].append(float(self.saturated))
+        rec["w1_coupling"].append(float(w @ np.sqrt(ex2 + ev2)))
+        rec["w1_bound"].append(min(rec["bound"][-1], float(w @ per)))
+        if self.tracker is not None:
+            with _threads.blas_threads(1):
+                self.tracker.record(t - self.t0, state.x, state.v, self.PX, self.PV, self.Y,
+                                    self.W)
+
+    def records(self) -> dict:
+        """The recorded series as arrays (plus the paper's bounds when requested)."""
+        out = {key: np.asarray(val, dtype=float) for key, val in self.rec.items()}
+        out["step"] = out["step"].astype(np.int64)
+        if self.tracker is not None:
+            out.update(self.tracker.bounds())
+        else:
+            nan = np.full(len(out["t"]), np.nan)
+            out["paper_bound"], out["paper_bound_max"] = nan, nan.copy()
+        return out
