@@ -199,9 +199,10 @@ def _scene_from(draw, d, family):
         if draw(st.booleans()):
             effects.append(Alignment(Quadratic(draw(st.floats(-0.5, 1.0)))))
     else:
-        effects.append(AttractionRepulsion(Morse(draw(st.floats(0.0, 2.0)), draw(st.floats(0.3, 2.0)),
-                                                 draw(st.floats(0.0, 2.0)), draw(st.floats(0.2, 1.0)),
-                                                 soft=draw(st.floats(0.1, 1.0)))))
+        morse = Morse(draw(st.floats(0.0, 2.0)), draw(st.floats(0.3, 2.0)),
+                      draw(st.floats(0.0, 2.0)), draw(st.floats(0.2, 1.0)),
+                      soft=draw(st.floats(0.1, 1.0)))
+        effects.append(AttractionRepulsion(morse))
         if draw(st.booleans()):
             effects.append(SelfPropulsion(draw(st.floats(-1.0, 1.5)), draw(st.floats(0.0, 0.6))))
         if draw(st.booleans()):
@@ -231,7 +232,10 @@ def _cases(draw, family):
     x0 = rng.normal(size=(N, d)) * draw(st.sampled_from([0.1, 1.0, 3.0])) + off
     v0 = rng.normal(size=(N, d)) * draw(st.sampled_from([0.1, 1.0]))
     kind = draw(st.sampled_from(["jl", "jl", "orthogonal"]))
-    M = np.linalg.qr(rng.normal(size=(d, d)))[0][:k] if kind == "orthogonal" else _jl(k, d, seed + 1)
+    if kind == "orthogonal":
+        M = np.linalg.qr(rng.normal(size=(d, d)))[0][:k]
+    else:
+        M = _jl(k, d, seed + 1)
     dt = draw(st.sampled_from([0.01, 0.05, 0.1]))
     steps = draw(st.integers(1, 30))
     engine = draw(st.sampled_from(["fast", "numpy"]))

@@ -131,7 +131,8 @@ def _save_steps(save, n_steps: int, t0: float, dt: float) -> np.ndarray:
     if save.t is not None:
         idx = np.rint((save.t - t0) / dt).astype(np.int64)
         off = np.abs(t0 + idx * dt - save.t)
-        if np.any(off > 1e-9 * max(1.0, abs(t0 + n_steps * dt))) or np.any(idx < 0) or np.any(idx > n_steps):
+        tol = 1e-9 * max(1.0, abs(t0 + n_steps * dt))
+        if np.any(off > tol) or np.any(idx < 0) or np.any(idx > n_steps):
             raise InvalidInput(f"save.t must lie on the step grid t0 + n*dt within t_span; got "
                                f"{save.t!r}")
         return np.unique(np.concatenate([[0], idx, [n_steps]]))
@@ -270,7 +271,8 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     nf = (t1 - t0) / dt
     n_steps = int(round(nf))
     if n_steps < 1 or abs(n_steps - nf) > 1e-9 * max(1.0, nf):
-        raise InvalidInput(f"(t1 - t0)/dt must be a positive integer, got {t1 - t0!r}/{dt!r} = {nf!r}")
+        raise InvalidInput(f"(t1 - t0)/dt must be a positive integer, got {t1 - t0!r}/{dt!r} = "
+                           f"{nf!r}")
     steps = _save_steps(save, n_steps, t0, dt)
     obs = CertificateObserver(scene, P, save_steps=steps, engine=engine, paper=paper)
     _lockstep(scene, x0, v0, t0, dt, n_steps, obs)
@@ -286,5 +288,6 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
                        bound_max=rec["bound_max"], roundoff=rec["roundoff"],
                        w1_coupling=rec["w1_coupling"], w1_bound=rec["w1_bound"],
                        paper_bound=rec["paper_bound"], paper_bound_max=rec["paper_bound_max"],
-                       saturated=rec["saturated"].astype(bool), method=method, dt=dt, n_steps=n_steps, n_agents=x0.shape[0],
+                       saturated=rec["saturated"].astype(bool), method=method, dt=dt,
+                       n_steps=n_steps, n_agents=x0.shape[0],
                        d=x0.shape[1], k=P.k, wall_time=time.perf_counter() - start, note=note)

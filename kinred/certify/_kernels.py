@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from ..dynamics._kernels import pow_row64

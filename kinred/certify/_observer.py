@@ -158,7 +158,8 @@ class CertificateObserver:
             pc = P.apply(state.shift)
             self.delta_c = self.shift_y - pc
             self.rho_c = (self.proj_round * float(np.linalg.norm(state.shift))
-                          + 2 * _ro.U64 * (float(np.linalg.norm(self.shift_y)) + float(np.linalg.norm(pc))))
+                          + 2 * _ro.U64 * (float(np.linalg.norm(self.shift_y))
+                                           + float(np.linalg.norm(pc))))
         else:
             self.delta_c = np.zeros(self.k)
             self.rho_c = 0.0
@@ -171,7 +172,7 @@ class CertificateObserver:
         self.bv = _rows(v0e) * (1 + u4)
         xm, xf = _wnorm(e0, self.w)
         vm, vf = _wnorm(v0e, self.w)
-        self.fx = _rows(e0 - self.w @ e0) * (1 + u4) + 2 * u4 * self.bx.max(initial=0.0) + self.rho_c
+        self.fx = _rows(e0 - self.w @ e0) * (1 + u4) + 2 * u4 * self.bx.max(initial=0.0)
         self.fv = _rows(v0e - self.w @ v0e) * (1 + u4) + 2 * u4 * self.bv.max(initial=0.0)
         self.saturated = False
         nx = math.sqrt(float(self.w @ self.bx ** 2))
@@ -234,16 +235,19 @@ class CertificateObserver:
         """The trivial bounds ``|y − Mx| ≤ |y| + |Mx|`` (per agent, of the fluctuations, of the
         means and in the weighted RMS norm) from the sizes of the two states (docs §6)."""
         w = self.w
-        g = 1.0 + 8.0 * _ro.U64
+        g = 1.0 + 2.0 * _ro.gamma(self.n + self.k + 8)        # rounding of the norms and sums
         dc = float(np.linalg.norm(self.delta_c)) + self.rho_c
         out = {}
         for key, A, B, extra in (("x", Y, PX, dc), ("v", W, PV, 0.0)):
             ma, mb = w @ A, w @ B
             ra, rb = _rows(A), _rows(B)
-            fa, fb = _rows(A - ma), _rows(B - mb)
+            nma, nmb = float(np.linalg.norm(ma)), float(np.linalg.norm(mb))
+            # the centring itself rounds at the scale of the rows and the means
+            fa = _rows(A - ma) + 4.0 * _ro.U64 * (ra + nma)
+            fb = _rows(B - mb) + 4.0 * _ro.U64 * (rb + nmb)
             out["b" + key] = (ra + rb + extra) * g
             out["f" + key] = (fa + fb) * g
-            out[key + "m"] = (float(np.linalg.norm(ma)) + float(np.linalg.norm(mb)) + extra) * g
+            out[key + "m"] = (nma + nmb + extra) * g
             out[key + "f"] = (math.sqrt(float(w @ fa ** 2)) + math.sqrt(float(w @ fb ** 2))) * g
             out[key + "l2"] = (math.sqrt(float(w @ ra ** 2)) + math.sqrt(float(w @ rb ** 2))
                                + extra) * g
@@ -276,8 +280,9 @@ class CertificateObserver:
                 dneg_v += agg.dneg
                 # κ·(weighted std of row i of φ): |Σⱼ aᵢⱼ ε̃ⱼ| ≤ this·‖ε̃‖_w (docs §5)
                 ks2 = plan.kappa * agg.s2
+                # rounding: relative errors η of dᵢ and s2ᵢ move κ s2 − d² by ≤ 3η κ s2
                 kstd += np.sqrt(np.maximum(ks2 - agg.dsum ** 2, 0.0)
-                                + _ro.gamma(2 * n + 8) * ks2)
+                                + (1e-11 + 3.0 * _ro.gamma(2 * n + 8)) * ks2)
                 # spectral gap >= κ Σᵢ wᵢ minⱼ φᵢⱼ (threshold decomposition, docs §2)
                 rm = np.where(np.isfinite(agg.rowmin), agg.rowmin, 0.0)
                 lam2 += plan.kappa * float(self.w @ rm)
@@ -352,12 +357,16 @@ class CertificateObserver:
         r_v *= m
         mixed = lap_x + r_x + r_v           # mean-free inputs of the velocity error
 
+        rnd = 1.0 + 2.0 * _ro.gamma(n + 4)       # rounding of a weighted norm
+
         def wn(a):
-            return math.sqrt(float(w @ (a * a)))
+            return math.sqrt(float(w @ (a * a))) * rnd
 
         nlx, nrx, nrv = wn(lap_x), wn(r_x), wn(r_v)
-        txm, txf = _wnorm(tau_x, w)
-        tvm, tvf = _wnorm(tau_v, w)
+        # norms of the defects, with room for their own rounding (sums of N·k terms)
+        txm, txf, tvm, tvf = (a * rnd * (1.0 + 2.0 * _ro.gamma(self.k + 2))
+                              for a in _wnorm(tau_x, w) + _wnorm(tau_v, w))
+        rk = 1.0 + 2.0 * _ro.gamma(self.k + 2)
 
         def l2(S, inx_m, inx_f, inv_m, inv_f, ax_, av_, cap):
             xm_, xf_, vm_, vf_ = S
@@ -376,13 +385,23 @@ class CertificateObserver:
         X_m, X_f, V_m, V_f = l2(self.L2, txm, txf, tvm, tvf, ax, av, True)
         self.R2 = l2(self.R2, 0.0, 0.0, 0.0, 0.0, ax, av, False)
         # per agent, whole errors (§4) and fluctuations (§5)
-        tx_dev = tau_x - w @ tau_x
-        tv_dev = tau_v - w @ tau_v
-        nbx = bx + h * bv + _rows(tau_x) + ax
-        nfx = fx + h * fv + _rows(tx_dev) + 2.0 * ax
-        nbv = coef["p"] * bv + h * (lap_v + mixed) + _rows(tau_v) + av
+        gn = 2.0 * _ro.gamma(n + 2)               # rounding of the weighted mean removed
+        rtx, rtv = _rows(tau_x) * rk, _rows(tau_v) * rk
+        dtx = _rows(tau_x - w @ tau_x) * rk + gn * float(np.max(rtx, initial=0.0))
+        dtv = _rows(tau_v - w @ tau_v) * rk + gn * float(np.max(rtv, initial=0.0))
+        nbx = bx + h * bv + rtx + ax
+        nfx = fx + h * fv + dtx + 2.0 * ax
+        nbv = coef["p"] * bv + h * (lap_v + mixed) + rtv + av
         if not sp:
-            nfv = coef["p"] * fv + h * (m * coef["kstd"] * vf + mixed) + _rows(tv_dev) + 2.0 * av
+            nfv = coef["p"] * fv + h * (m * coef["kstd"] * vf + mixed) + dtv + 2.0 * av
+        # the recursions' own arithmetic: sums of a few positive terms, relative error ≤ 8u
+        up = 1.0 + 8.0 * _ro.U64
+        X_m, X_f, V_m, V_f = X_m * up, X_f * up, V_m * up, V_f * up
+        nbx *= up
+        nfx *= up
+        nbv *= up
+        if not sp:
+            nfv *= up
         # the trivial size caps: |y − Mx| ≤ |y| + |Mx| (docs §6)
         np.minimum(nbx, sizes["bx"], out=nbx)
         np.minimum(nfx, sizes["fx"], out=nfx)
@@ -401,20 +420,21 @@ class CertificateObserver:
         X_m, X_f = min(X_m, wbx), min(X_f, wfx, wbx)
         if sp:
             V_f = min(V_f, wbv)
-            nfv = nbv + V_f                  # |ε̃ᵢ| ≤ |εᵢ| + |ε̄| and |ε̄| ≤ ‖ε‖_w
+            nfv = (nbv + V_f) * (1.0 + 3.0 * _ro.U64)   # |ε̃ᵢ| ≤ |εᵢ| + |ε̄|, |ε̄| ≤ ‖ε‖_w
         else:
             wfv = wn(nfv)
             V_m, V_f = min(V_m, wbv), min(V_f, wfv, wbv)
         pos = w > 0
         inv = np.zeros(n)
-        inv[pos] = 1.0 / np.sqrt(w[pos])
-        np.minimum(nfx, nbx + X_m, out=nfx)
-        np.minimum(nfv, nbv + V_m + (V_f if sp else 0.0), out=nfv)
+        inv[pos] = (1.0 + 4.0 * _ro.U64) / np.sqrt(w[pos])
+        up2 = 1.0 + 3.0 * _ro.U64             # a rounded sum of two bounds is still one
+        np.minimum(nfx, (nbx + X_m) * up2, out=nfx)
+        np.minimum(nfv, (nbv + V_m + (V_f if sp else 0.0)) * up2, out=nfv)
         nfx[pos] = np.minimum(nfx[pos], X_f * inv[pos])
         nfv[pos] = np.minimum(nfv[pos], V_f * inv[pos])
-        np.minimum(nbx, X_m + nfx, out=nbx)
+        np.minimum(nbx, (X_m + nfx) * up2, out=nbx)
         if not sp:
-            np.minimum(nbv, V_m + nfv, out=nbv)
+            np.minimum(nbv, (V_m + nfv) * up2, out=nbv)
         else:
             nbv[pos] = np.minimum(nbv[pos], V_f * inv[pos])
         L2 = [X_m, X_f, V_m, V_f]
@@ -429,14 +449,15 @@ class CertificateObserver:
 
     # ------------------------------------------------------------------ records
     def _record(self, t: float, state: StepState) -> None:
-        P, w = self.P, self.w
+        w = self.w
         e = (self.Y - self.PX) + self.delta_c
         ev = self.W - self.PV
         ex2 = np.einsum("ij,ij->i", e, e)
         ev2 = np.einsum("ij,ij->i", ev, ev)
         mu_x = self.proj_round * _ro.row_max(state.x) + self.rho_c
         mu_v = self.proj_round * _ro.row_max(state.v)
-        grow = 1.0 + 4.0 * _ro.U64
+        # the measured norms are sums of N·k terms: compare with room for their rounding
+        grow = 1.0 + 2.0 * _ro.gamma(self.n + self.k + 8)
         l2 = math.sqrt(sum(s * s for s in self.L2))
         l2 = min(l2, math.sqrt(float(w @ (self.bx ** 2 + self.bv ** 2))))
         per = np.hypot(self.bx + mu_x, self.bv + mu_v) * grow

@@ -94,16 +94,16 @@ def _check_slope(e, kernel):
     fn = getattr(kernel, "slope_bound", None)
     if not callable(fn):
         raise NotProjectable(
-            f"{e!r}: its kernel {kernel!r} has no slope_bound(lo, hi) (sup |phi'| over an interval), "
-            "which the certificate needs for the mean-value step; built-in kernels with one: "
-            "CuckerSmale, Morse(soft > 0), Quadratic")
+            f"{e!r}: its kernel {kernel!r} has no slope_bound(lo, hi) (sup |phi'| over an "
+            "interval), which the certificate needs for the mean-value step; built-in kernels "
+            "with one: CuckerSmale, Morse(soft > 0), Quadratic")
     try:
         out = np.asarray(fn(np.array([0.0, 1.0]), np.array([1.0, 2.0])), dtype=float)
     except InvalidInput as exc:
         raise NotProjectable(f"{e!r} cannot be certified: {exc}") from None
     if out.shape != (2,) or not np.all(np.isfinite(out)) or np.any(out < 0):
-        raise NotProjectable(f"{e!r}: kernel.slope_bound returned {out!r} for two intervals; it must "
-                             "return finite values >= 0 of the broadcast shape")
+        raise NotProjectable(f"{e!r}: kernel.slope_bound returned {out!r} for two intervals; it "
+                             "must return finite values >= 0 of the broadcast shape")
 
 
 def make_plan(scene: Scene, n_agents: int) -> Plan:

@@ -32,7 +32,8 @@ import math
 
 import numpy as np
 
-__all__ = ["U64", "U32", "COEF_MARGIN", "gamma", "row_max", "spread", "pass_constants", "step_allowance", "field_rounding"]
+__all__ = ["U64", "U32", "COEF_MARGIN", "gamma", "row_max", "spread", "pass_constants",
+           "step_allowance", "field_rounding"]
 
 #: Unit round-off of float64 and float32.
 U64 = 2.0 ** -53

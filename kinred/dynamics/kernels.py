@@ -319,7 +319,8 @@ class Morse:
         With ``r = √(s² + soft²)`` and ``g(r) = U′(r)/r``, ``u′(s) = g′(r)·s/r`` and
 
         .. math:: g'(r) = P_r(r) - P_a(r), \quad
-                  P_a(r) = \tfrac{C_a}{\ell_a} e^{-r/\ell_a}\bigl(\tfrac{1}{\ell_a r} + \tfrac{1}{r^2}\bigr),
+                  P_a(r) = \tfrac{C_a}{\ell_a} e^{-r/\ell_a}
+                  \bigl(\tfrac{1}{\ell_a r} + \tfrac{1}{r^2}\bigr),
                   \quad P_r \text{ likewise},
 
         both ``P`` positive and decreasing, so on ``r ∈ [r_lo, r_hi]``
@@ -342,8 +343,9 @@ class Morse:
         """
         if not self.soft:
             raise InvalidInput(
-                f"{self!r}: slope_bound needs soft > 0: with soft = 0, u(s) = U'(s)/s is unbounded "
-                "near s = 0 (coincident agents), so no Lipschitz bound exists; use Morse(..., soft=eps)")
+                f"{self!r}: slope_bound needs soft > 0: with soft = 0, u(s) = U'(s)/s is "
+                "unbounded near s = 0 (coincident agents), so no Lipschitz bound exists; use "
+                "Morse(..., soft=eps)")
         lo, hi = _interval(lo, hi)
         e2 = self.soft * self.soft
         r_lo = np.sqrt(lo * lo + e2)
