@@ -13,8 +13,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
 API_MODULES = ["measures", "quantize", "distance", "projection", "dynamics", "pairsum",
-               "integrate", "observables", "recovery", "ensemble", "kinetic", "io", "report",
-               "errors"]
+               "integrate", "observables", "recovery", "ensemble", "kinetic", "certify", "io",
+               "report", "errors"]
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,8 @@ def test_cli_page_shows_every_subcommand(html):
 
 def test_user_pages_exist_and_show_equations(html):
     for page in ["index", "getting-started", "measures", "dynamics", "projections", "recovery",
-                 "kinetic", "cost", "scene-file", "measures-file", "examples", "architecture"]:
+                 "kinetic", "certificates", "cost", "scene-file", "measures-file", "examples",
+                 "architecture"]:
         assert (html / f"{page}.html").exists(), page
     # the equations are rendered as math (MathJax), with the paper's numbers next to them
     measures = (html / "measures.html").read_text(encoding="utf-8")

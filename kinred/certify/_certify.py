@@ -71,7 +71,7 @@ class Certificate:
         ``bound`` says only that.
     labels : mapping
         What each number is: "measured", "certified bound", "a-priori bound (paper's
-        constants)" or "estimate" (:data:`LABELS`).
+        constants)" or "estimate" (``kinred.certify.LABELS``).
     method : str
     dt : float
     n_steps : int
@@ -210,7 +210,8 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     engine : {"fast", "numpy"}
         Pair pass of the certificate: compiled or the plain-numpy twin.
     paper : bool
-        Also evaluate the paper's bounds (one high-dimensional pair pass per saved step).
+        Also evaluate the paper's bounds (one high-dimensional pair pass per saved step: save
+        sparingly, or pass ``False``, for large runs).
 
     Returns
     -------
@@ -284,6 +285,9 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
             "allowance estimated, docs/certificates.md); noise is excluded")
     if np.isnan(rec["paper_bound"]).all() and paper:
         note += "; paper_bound (eq. (2.18)) is for a pure Cucker-Smale scene only: NaN here"
+    if np.any(rec["saturated"] > 0):
+        note += ("; saturated at some saved times: there the bound is the trivial |y| + |Mx| "
+                 "(the projected run has lost the high-dimensional one)")
     return Certificate(t=t, error=rec["error"], error_max=rec["error_max"], bound=rec["bound"],
                        bound_max=rec["bound_max"], roundoff=rec["roundoff"],
                        w1_coupling=rec["w1_coupling"], w1_bound=rec["w1_bound"],

@@ -107,7 +107,7 @@ def step_allowance(h: float, *, Y1: float, W0: float, W1: float, PX0: float, PX1
 
     Arguments are maxima of per-agent norms at the start (``0``) and end (``1``) of the step:
     ``Y1 = max|Y⁺|``, ``W0``, ``W1``, ``PX0``, ``PX1``, ``PV0``, ``PV1``; ``dW = max|F′(Y, W)|``,
-    ``Fd = max|F′(PX, PV)|``; ``eng_run``, ``eng_true`` from :func:`field_rounding`.
+    ``Fd = max|F′(PX, PV)|``; ``eng_run``, ``eng_true`` from ``field_rounding`` (this module).
 
     Examples
     --------
