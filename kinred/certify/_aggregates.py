@@ -226,7 +226,7 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
 
     def work(g, my_strips):
         q = {nm: np.empty(maxel) for nm in names}
-        buf = np.empty((2, n))
+        buf = np.empty((9, n))
         scr = np.empty((3, n))
         outs = [_new_out(n) for _ in fast]
         for i0, i1 in my_strips:

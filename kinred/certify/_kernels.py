@@ -3,6 +3,7 @@
 Only this module of :mod:`kinred.certify` imports numba; every kernel uses ``cache=True``.
 
 ``strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, out, buf, scr)``
+    (``buf (9, ≥ N)``, ``scr (3, ≥ N)`` scratch)
     One row strip ``[i0, i0 + b)`` against the columns ``[i0, N)`` (squared distances of the
     projected run's source ``qrun``, of the projected-true source ``qtrue`` and of the
     projected-true carrier ``qcar``, as the engine's strips: each unordered pair ``i < j``
@@ -70,10 +71,72 @@ def _morse_at(r, A, la, B, lr):  # pragma: no cover - compiled
     return u, pa, pr, mag
 
 
+_FM = {"reassoc", "contract"}
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _pairs_cs(q1, q2, qc, ph, pt, beta, G, s_star, f_star, fac, rg, re_, rs,
+              V0, V1, V2, V3, V4, V5, V6):  # pragma: no cover - compiled
+    # per pair of one row: V = [phi, |phi|, max(-phi, 0), lam |Mz_i - Mz_j|, psi_true,
+    # psi_run, max(phi, 0)] (branch-free, vectorizable); ph, pt: phi(r'), phi(rho)
+    gev = 0.6 * G if beta > 0.0 else 0.0
+    for l in range(q1.shape[0]):
+        a1 = q1[l]
+        a2 = q2[l]
+        r1 = math.sqrt(a1)
+        r2 = math.sqrt(a2)
+        p1 = ph[l]
+        p2 = pt[l]
+        f1 = 2.0 * beta * r1 / (1.0 + a1) * p1
+        f2 = 2.0 * beta * r2 / (1.0 + a2) * p2
+        lo = min(r1, r2)
+        hi = max(r1, r2)
+        lam = f_star if (lo <= s_star and hi >= s_star) else max(f1, f2)
+        V0[l] = p1
+        V1[l] = p1
+        V2[l] = 0.0
+        V3[l] = lam * fac * math.sqrt(qc[l])
+        V4[l] = rg * p2 + re_ * (p2 + gev) + rs * 2.0 * beta * p2 * a2 / (1.0 + a2)
+        V5[l] = rg * p1 + re_ * (p1 + gev) + rs * 2.0 * beta * p1 * a1 / (1.0 + a1)
+        V6[l] = p1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _pairs_morse(q1, q2, qc, par, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5,
+                 V6):  # pragma: no cover - compiled
+    A = par[0]
+    la = par[1]
+    B = par[2]
+    lr = par[3]
+    e2 = par[4] * par[4]
+    for l in range(q1.shape[0]):
+        a1 = q1[l]
+        a2 = q2[l]
+        R1 = math.sqrt(a1 + e2)
+        R2 = math.sqrt(a2 + e2)
+        phi, pa1, pr1, ev1 = _morse_at(R1, A, la, B, lr)
+        phi2, pa2, pr2, ev2 = _morse_at(R2, A, la, B, lr)
+        g1 = max(abs(pr2 - pa1), abs(pr1 - pa2))
+        lam = g1 * (math.sqrt(a2) / R2 if R1 <= R2 else math.sqrt(a1) / R1)
+        V0[l] = phi
+        V1[l] = abs(phi)
+        V2[l] = -phi if phi < 0.0 else 0.0
+        V3[l] = lam * fac * math.sqrt(qc[l])
+        V4[l] = rg * abs(phi2) + re_ * ev2 + rs * a2 / R2 * (pa2 + pr2)
+        V5[l] = rg * abs(phi) + re_ * ev1 + rs * a1 / R1 * (pa1 + pr1)
+        V6[l] = phi if phi > 0.0 else 0.0
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, out, buf,
                scr):  # pragma: no cover - compiled
     b, m = qrun.shape
+    n = c.shape[0]
+    # the helpers run without bounds checks: check the shapes once here
+    if (buf.shape[0] < 9 or buf.shape[1] < m or scr.shape[0] < 3 or scr.shape[1] < m
+            or out.shape[0] < 9 or out.shape[1] < n or i0 + m > n or qtrue.shape != qrun.shape
+            or qcar.shape != qrun.shape or bz.shape[0] < n or bs.shape[0] < n):
+        raise ValueError("strip_term: inconsistent shapes of the blocks and buffers")
     beta = par[1] if kind == 1 else 0.0
     G = par[0]
     s_star = 1.0 / math.sqrt(2.0 * beta + 1.0)
@@ -85,109 +148,114 @@ def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, ou
     rg = rnd[0]
     re_ = rnd[1]
     rs = rnd[2]
-    gev = 0.6 * G if (kind == 1 and beta > 0.0) else 0.0
     for a in range(b):
         i = i0 + a
         j0 = a + 1
         L = m - j0
         if L <= 0:
             continue
-        ph = buf[0, :L]
-        pt = buf[1, :L]
+        V0 = buf[2, :L]
+        V1 = buf[3, :L]
+        V2 = buf[4, :L]
+        V3 = buf[5, :L]
+        V4 = buf[6, :L]
+        V5 = buf[7, :L]
+        V6 = buf[8, :L]
         if kind == 1:
+            ph = buf[0, :L]
+            pt = buf[1, :L]
             ph[:] = qrun[a, j0:]
             pow_row64(ph, G, beta, scr)
             pt[:] = qtrue[a, j0:]
             pow_row64(pt, G, beta, scr)
-        ci = c[i]
-        bzi = bz[i]
-        bsi = bs[i]
-        posi = pos[i]
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        s3 = 0.0
-        s4 = 0.0
-        s5 = 0.0
-        s6 = out[6, i]
-        s7 = 0.0
-        s8 = 0.0
-        for l in range(L):
-            jj = j0 + l
-            j = i0 + jj
-            q1 = qrun[a, jj]
-            q2 = qtrue[a, jj]
-            r1 = math.sqrt(q1)
-            r2 = math.sqrt(q2)
-            zc = math.sqrt(qcar[a, jj])
-            if kind == 1:
-                phi = ph[l]
-                mag1 = rg * ph[l] + re_ * (ph[l] + gev) + rs * 2.0 * beta * ph[l] * q1 / (1.0 + q1)
-                mag2 = rg * pt[l] + re_ * (pt[l] + gev) + rs * 2.0 * beta * pt[l] * q2 / (1.0 + q2)
-                if beta > 0.0:
-                    f1 = _cs_slope(r1, q1, ph[l], beta)
-                    f2 = _cs_slope(r2, q2, pt[l], beta)
-                    lam = max(f1, f2)
-                    if min(r1, r2) <= s_star and max(r1, r2) >= s_star:
-                        lam = f_star
-                else:
-                    lam = 0.0
-            elif kind == 2:
-                A = par[0]
-                la = par[1]
-                B = par[2]
-                lr = par[3]
-                e2 = par[4] * par[4]
-                R1 = math.sqrt(q1 + e2)
-                R2 = math.sqrt(q2 + e2)
-                phi, pa1, pr1, ev1 = _morse_at(R1, A, la, B, lr)
-                phi2, pa2, pr2, ev2 = _morse_at(R2, A, la, B, lr)
-                mag1 = rg * abs(phi) + re_ * ev1 + rs * q1 / R1 * (pa1 + pr1)
-                mag2 = rg * abs(phi2) + re_ * ev2 + rs * q2 / R2 * (pa2 + pr2)
-                if R1 <= R2:
-                    g1 = max(abs(pr2 - pa1), abs(pr1 - pa2))
-                    lam = g1 * (r2 / R2)
-                else:
-                    g1 = max(abs(pr1 - pa2), abs(pr2 - pa1))
-                    lam = g1 * (r1 / R1)
-            else:
-                phi = par[0]
-                lam = 0.0
-                mag1 = (rg + re_) * abs(phi)
-                mag2 = mag1
-            lam *= fac
-            aphi = abs(phi)
-            nphi = -phi if phi < 0.0 else 0.0
-            t = lam * zc
-            cj = c[j]
-            s0 += cj * phi
-            s1 += cj * nphi
-            s2 += cj * aphi * bz[j]
-            s3 += cj * t
-            s4 += cj * t * bs[j]
-            s5 += cj * mag2
-            s8 += cj * mag1
-            s7 += cj * phi * phi
-            out[0, j] += ci * phi
-            out[1, j] += ci * nphi
-            out[2, j] += ci * aphi * bzi
-            out[3, j] += ci * t
-            out[4, j] += ci * t * bsi
-            out[5, j] += ci * mag2
-            out[8, j] += ci * mag1
-            out[7, j] += ci * phi * phi
-            pp = phi if phi > 0.0 else 0.0
-            if pos[j] and pp < s6:
-                s6 = pp
-            if posi and pp < out[6, j]:
-                out[6, j] = pp
-        out[0, i] += s0
-        out[1, i] += s1
-        out[2, i] += s2
-        out[3, i] += s3
-        out[4, i] += s4
-        out[5, i] += s5
-        out[6, i] = s6
-        out[7, i] += s7
-        out[8, i] += s8
+            _pairs_cs(qrun[a, j0:], qtrue[a, j0:], qcar[a, j0:], ph, pt, beta, G, s_star,
+                      f_star, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5, V6)
+        elif kind == 2:
+            _pairs_morse(qrun[a, j0:], qtrue[a, j0:], qcar[a, j0:], par, fac, rg, re_, rs,
+                         V0, V1, V2, V3, V4, V5, V6)
+        else:
+            for l in range(L):
+                V0[l] = par[0]
+                V1[l] = abs(par[0])
+                V2[l] = -par[0] if par[0] < 0.0 else 0.0
+                V3[l] = 0.0
+                V4[l] = (rg + re_) * abs(par[0])
+                V5[l] = V4[l]
+                V6[l] = par[0] if par[0] > 0.0 else 0.0
+        _accumulate(i, i0 + j0, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6, out)
     return 0
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _accumulate(i, jstart, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6,
+                out):  # pragma: no cover - compiled
+    # row i from the columns j = jstart.., and those columns from row i (each pair once);
+    # contiguous 1-D views so that the loops vectorize
+    L = V0.shape[0]
+    je = jstart + L
+    cj = c[jstart:je]
+    pj = pos[jstart:je]
+    bzj = bz[jstart:je]
+    bsj = bs[jstart:je]
+    o0 = out[0, jstart:je]
+    o1 = out[1, jstart:je]
+    o2 = out[2, jstart:je]
+    o3 = out[3, jstart:je]
+    o4 = out[4, jstart:je]
+    o5 = out[5, jstart:je]
+    o6 = out[6, jstart:je]
+    o7 = out[7, jstart:je]
+    o8 = out[8, jstart:je]
+    ci = c[i]
+    bzi = bz[i]
+    bsi = bs[i]
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    s5 = 0.0
+    s7 = 0.0
+    s8 = 0.0
+    for l in range(L):
+        w = cj[l]
+        phi = V0[l]
+        t = V3[l]
+        s0 += w * phi
+        s1 += w * V2[l]
+        s2 += w * V1[l] * bzj[l]
+        s3 += w * t
+        s4 += w * t * bsj[l]
+        s5 += w * V4[l]
+        s7 += w * phi * phi
+        s8 += w * V5[l]
+    for l in range(L):
+        phi = V0[l]
+        t = V3[l]
+        o0[l] += ci * phi
+        o1[l] += ci * V2[l]
+        o2[l] += ci * V1[l] * bzi
+        o3[l] += ci * t
+        o4[l] += ci * t * bsi
+        o5[l] += ci * V4[l]
+        o7[l] += ci * phi * phi
+        o8[l] += ci * V5[l]
+    s6 = out[6, i]
+    if pos[i]:
+        for l in range(L):
+            pp = V6[l]
+            if pp < o6[l]:
+                o6[l] = pp
+    for l in range(L):
+        pp = V6[l]
+        if pj[l] and pp < s6:
+            s6 = pp
+    out[0, i] += s0
+    out[1, i] += s1
+    out[2, i] += s2
+    out[3, i] += s3
+    out[4, i] += s4
+    out[5, i] += s5
+    out[6, i] = s6
+    out[7, i] += s7
+    out[8, i] += s8
