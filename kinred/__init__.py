@@ -66,9 +66,7 @@ from .observables import (above_floor, centre, flocking_verdict, gamma, gamma_fl
 from .ensemble import EnsembleResult, grid, run_ensemble
 from .io import ResultFolder
 from . import kinetic
-# ``kinred.certify`` is the function (the package stays importable as
-# ``from kinred.certify import Certificate, CertificateObserver``)
-from .certify import Certificate, certify
+from . import certify
 
 __all__ = [
     "__version__",
@@ -95,6 +93,6 @@ __all__ = [
     "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
     # kinetic solutions: kinred.kinetic.solve / reduce / compare / theorem_bound
     "kinetic",
-    # certified error bounds of projected runs
-    "certify", "Certificate",
+    # certified error bounds of projected runs: kinred.certify.certify / Certificate
+    "certify",
 ]

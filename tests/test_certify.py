@@ -302,6 +302,7 @@ def test_tightness_figure4_like():
         c = certify(scene, _jl(k, 100, k), x0, v0, t_span=(0, 4), dt=0.02, save=SaveAt(every=25),
                     paper=False)
         assert _worst(c) <= 10.0
+        assert _worst(c) <= 2.0                   # measured 1.14; the yardstick's 3.9-like
         assert not c.saturated.any()
 
 
@@ -330,7 +331,10 @@ def test_tightness_table1_like(beta):
     scene = Scene([Alignment(CuckerSmale(0.8 * 1000 / 150, beta))], normalize="sum")
     c = certify(scene, _jl(25, 200, 11), x0, v0, t_span=(0, 5), dt=0.02, save=SaveAt(every=25),
                 paper=False)
-    assert _worst(c) <= 100.0
+    assert _worst(c) <= 100.0                     # the acceptance level
+    # regression guard (measured 2.20 and 2.72): without the size caps of docs §7 the ratio is
+    # 5.2 and 21.8, without them and the per-agent fluctuations of §5 18 and 101
+    assert _worst(c) <= 4.0
 
 
 # ---------------------------------------------------------------------------- paper bounds
