@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dynamics import _kernels as _dyn
-from ..dynamics import _threads
-from ..dynamics.scene import _SMALL_K, _strips
+from ..pairsum import _kernels as _dyn
+from .. import _parallel
+from ..pairsum.dense import SMALL_K as _SMALL_K, strips as _strips
 from . import _kernels
 
 __all__ = ["TermAgg", "pair_pass", "pair_pass_numpy"]
@@ -213,7 +213,7 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
     names = sorted({nm for t in fast for nm in _names(t)})
     geo = _geometry(pts, names)
     # below a few hundred agents a thread hand-off costs more than the work it shares
-    nthreads = _threads.get_num_threads() if n >= _MIN_PARALLEL else 1
+    nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
     strips = _strips(n, block, k, nthreads)
     nthreads = min(nthreads, len(strips))
     maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
@@ -246,7 +246,7 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
         g = loads.index(min(loads))
         groups[g].append((i0, i1))
         loads[g] += (i1 - i0) * (n - i0)
-    results = _threads.run_parallel(work, [sorted(gr) for gr in groups])
+    results = _parallel.run_parallel(work, [sorted(gr) for gr in groups])
     outs = results[0]
     for o2 in results[1:]:
         for t in range(len(fast)):

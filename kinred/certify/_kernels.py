@@ -47,7 +47,7 @@ import math
 
 from numba import njit
 
-from ..dynamics._kernels import pow_row64
+from ..pairsum._kernels import pow_row64
 
 __all__ = ["strip_term"]
 

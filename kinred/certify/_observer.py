@@ -28,7 +28,8 @@ import numpy as np
 
 from .. import observables as _obs
 from .._validate import as_choice
-from ..dynamics import Scene, _threads
+from .. import _parallel
+from ..dynamics import Scene
 from ..errors import InvalidInput, SimulationDiverged
 from ..projection import as_projection
 from . import _roundoff as _ro
@@ -72,9 +73,9 @@ def _project(P, X: np.ndarray) -> np.ndarray:
     """``P.apply(X)`` by row blocks on the engine's threads, BLAS single-threaded (outside
     the engine's parallel regions a multithreaded BLAS contends with the engine's pool)."""
     n = X.shape[0]
-    nt = min(_threads.get_num_threads(), max(1, n * X.shape[1] * P.k // 2_000_000))
+    nt = min(_parallel.get_num_threads(), max(1, n * X.shape[1] * P.k // 2_000_000))
     if nt <= 1:
-        with _threads.blas_threads(1):
+        with _parallel.blas_threads(1):
             return P.apply(X)
     out = np.empty((n, P.k))
     cuts = np.linspace(0, n, nt + 1).astype(int)
@@ -82,7 +83,7 @@ def _project(P, X: np.ndarray) -> np.ndarray:
     def work(g, rows):
         out[rows[0]:rows[1]] = P.apply(X[rows[0]:rows[1]])
 
-    _threads.run_parallel(work, [(cuts[g], cuts[g + 1]) for g in range(nt)])
+    _parallel.run_parallel(work, [(cuts[g], cuts[g + 1]) for g in range(nt)])
     return out
 
 
@@ -473,7 +474,7 @@ class CertificateObserver:
         rec["w1_coupling"].append(float(w @ np.sqrt(ex2 + ev2)))
         rec["w1_bound"].append(min(rec["bound"][-1], float(w @ per)))
         if self.tracker is not None:
-            with _threads.blas_threads(1):
+            with _parallel.blas_threads(1):
                 self.tracker.record(t - self.t0, state.x, state.v, self.PX, self.PV, self.Y,
                                     self.W)
 

@@ -36,7 +36,7 @@ import numpy as np
 from ..dynamics import CuckerSmale
 from ..kinetic._bounds import effect_constants
 from ._aggregates import _geometry, _sqdist
-from ..dynamics.scene import _strips
+from ..pairsum.dense import strips as _strips
 
 __all__ = ["PaperTracker", "pair_ratio_extremes"]
 

@@ -78,7 +78,7 @@ def pass_constants(n: int, mixed: bool) -> tuple[float, float, float]:
     """``(g, a_e, a_s)`` of the pair pass's rounding scales ``ψ = g|φ| + a_e ε_eval + a_s σ``:
     ``g = γ_{N+4}`` (BLAS sums of ``N`` products), ``a_e = 16u`` (one kernel evaluation) and
     ``a_s`` the relative error of the engine's distances (``1e-12``: Gram blocks with the
-    close-pair fix-up, see :mod:`kinred.dynamics._kernels`; ``1e-3`` in float32)."""
+    close-pair fix-up, see :mod:`kinred.pairsum._kernels`; ``1e-3`` in float32)."""
     u = U32 if mixed else U64
     return gamma(n + 4, u), 16.0 * u, (DIST32 if mixed else DIST64)
 
