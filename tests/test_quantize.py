@@ -1,7 +1,9 @@
 """Quantization: closed forms, the lemmas' bounds against independent W1 values, budgets
-against brute force and the paper's recipe, streaming and refusal."""
+against brute force and the paper's recipe, streaming and refusal, extreme budgets."""
 
 import math
+import time
+from fractions import Fraction
 
 import numpy as np
 import ot
@@ -21,6 +23,7 @@ from kinred.measures import (
     Univariate,
 )
 from kinred.quantize import budget, paper_recipe, quantize, quantize_1d
+from kinred.quantize._size import fmt_bytes, fmt_count
 
 
 # ---------------------------------------------------------------------------------- 1-D
@@ -362,3 +365,51 @@ def test_isotropic_curse_beyond_float_range():
     q = quantize(TensorProduct([Uniform(0.0, 1.0)] * 200), eps=1.0)
     assert q.n_atoms == 100**200
     assert "n_atoms=1.000e+400" in repr(q) and len(repr(q)) < 200
+
+
+# ---------------------------------------------------------------------------------- extreme budgets
+# Issue 14: budgets are integers of any size and must stay cheap however many atoms they count.
+def test_counts_beyond_the_int_string_limit_print():
+    """Counts past 4300 digits (Python's int→str limit) are formatted from logarithms."""
+    b = budget([1.0] * 200, eps=1e-30)  # 1e32 atoms per coordinate: 6401 digits
+    assert len(set(b.counts)) == 1 and b.counts[0] == pytest.approx(1e32, rel=1e-11)
+    assert len(str(b.counts[0])) == 32 and "n_atoms=1.000e+6400" in repr(b)
+    assert fmt_count(10**5000) == "1.000e+5000" and fmt_count(10**1000 - 1) == "1.000e+1000"
+    assert fmt_count(999_999_999_999) == "999999999999" and fmt_count(50**18) == "3.815e+30"
+    assert fmt_bytes(3 * 2**30) == "3 GiB" and fmt_bytes(10**400) == "≈1.000e+400 bytes"
+
+
+@pytest.mark.parametrize("widths", [list(0.8 ** np.arange(200)), [1.0] * 200, [1.0, 1e-3, 1e-9]])
+@pytest.mark.parametrize("eps", [1e-30, 1e-300])
+def test_budget_at_tiny_eps_is_fast_and_feasible(widths, eps):
+    """Budgets are numbers: they must stay cheap however many atoms they count (the local
+    search once stepped N_j by one, forever at N_j ~ 1e30)."""
+    t0 = time.perf_counter()
+    b = budget(widths, eps=eps)
+    assert time.perf_counter() - t0 < 60  # ~1 s on a loaded 2-core machine
+    s = [Fraction(0.5 * w) for w in widths]
+    # feasible in exact arithmetic, and every N_j at least its own share c σ_j / eps
+    assert sum(si / n for si, n in zip(s, b.counts)) <= Fraction(eps) * Fraction(1 + 1e-9)
+    assert all(n >= si / (Fraction(eps) * Fraction(1 + 1e-9)) for si, n in zip(s, b.counts))
+    assert b.n_atoms == math.prod(b.counts) <= b.recipe.n_atoms
+    if len(set(widths)) == 1:  # isotropic: between the continuous optimum and its rounding
+        d = len(widths)
+        cont = (d * s[0] / (Fraction(eps) * Fraction(1 + 1e-9))) ** d
+        assert cont <= b.n_atoms <= math.ceil(d * s[0] / Fraction(eps)) ** d
+
+
+def test_paper_recipe_and_budget_at_subnormal_eps():
+    r = paper_recipe([1.0, 1.0, 1.0], 5e-324)  # 2Σcσ/ε overflows a float
+    n = math.ceil(Fraction(3 * 0.5) / (Fraction(5e-324) / 2 * Fraction(1 + 1e-12)))
+    assert (r.k_bar, r.n_common, r.n_atoms) == (3, n, n**3)
+    with pytest.raises(InvalidInput, match=r"eps=5e-324 is too small.*eps must be >= 4\.5e-305"):
+        budget([1.0, 1.0, 1.0], eps=5e-324)
+
+
+def test_budget_with_an_astronomical_atom_budget():
+    b = budget([1.0, 0.5, 0.25], atoms=10**400)
+    assert b.n_atoms <= 10**400 and b.optimal
+    # continuous optimum: N_j = s_j / ν with ∏ N_j = P, bound 3ν = 3 (∏ s / P)^(1/3)
+    assert b.bound == pytest.approx(3 * (0.5 * 0.25 * 0.125) ** (1 / 3) * 10 ** (-400 / 3), rel=1e-9)
+    with pytest.raises(InvalidInput, match="too large for 3 coordinate"):
+        budget([1.0, 0.5, 0.25], atoms=10**5000)
