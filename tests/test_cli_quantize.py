@@ -17,6 +17,7 @@ EXAMPLES = ROOT / "examples" / "measures"
 @pytest.fixture(autouse=True)
 def _commands(monkeypatch):
     monkeypatch.setattr(cli, "COMMAND_MODULES", ("kinred.commands.quantize", "kinred.commands.demo"))
+    monkeypatch.delenv("KINRED_MAX_BYTES", raising=False)  # the documented default limit, 2 GiB
 
 
 def _write(tmp_path, text, name="m.toml"):
@@ -74,8 +75,15 @@ def test_refuses_too_many_atoms(tmp_path, capsys):
     code = cli.main(["quantize", str(EXAMPLES / "decaying-200.toml"), "--eps", "0.1", "--out", str(out)])
     assert code == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "TooLarge" in err and "max_atoms" in err
+    # the 3.3e24 atoms are refused by the memory limit, which names what would fit instead
+    assert err.count("\n") == 1 and "TooLarge" in err and "3.297e+24 atoms" in err
+    assert "max_bytes = 2 GiB" in err and "eps >= " in err and "iter_chunks" in err
     assert not out.exists()
+    # an explicit count limit is honoured too
+    code = cli.main(["quantize", str(EXAMPLES / "decaying-200.toml"), "--eps", "0.1", "--out", str(out),
+                     "--max-atoms", "1000"])
+    err = capsys.readouterr().err
+    assert code == 2 and "max_atoms=1000" in err and not out.exists()
 
 
 @pytest.mark.parametrize("body,needle", [

@@ -24,6 +24,12 @@ exact W1 under the ℓ1 ground cost (sum of exact marginal 1-D errors), an upper
 Euclidean W1. ``--out`` writes ``points (N, d)`` and ``weights (N,)`` to an ``.npz`` file
 (atomically: temporary file in the same folder, then ``os.replace``); it refuses when the
 atom count exceeds ``--max-atoms``.
+
+Memory: the per-coordinate quantile arrays and the atom array are priced before they are
+built (:func:`kinred.quantize.preflight`); past the limit (the environment variable
+``KINRED_MAX_BYTES``, else 2 GiB) the command stops with one line
+``kinred: error: TooLarge: ...`` naming the atoms, the bytes, the limit and the ε that would
+fit, and exit code 2, before any large allocation.
 """
 
 from __future__ import annotations
@@ -36,7 +42,8 @@ import numpy as np
 
 from ..errors import InvalidInput
 from ..measures import Mixture, TensorProduct, load_measure
-from ..quantize import DEFAULT_MAX_ATOMS, RULE_CONSTANT, Quantization, quantize
+from ..quantize import RULE_CONSTANT, Quantization, quantize
+from ..quantize._size import fmt_count
 
 NAME = "quantize"
 HELP = "quantize a measure file (TOML) to atoms with a delayed-curse budget and W1 bounds"
@@ -51,14 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="quantile levels: midpoint (2i-1)/(2N), bound σ/(2N), default; "
                              "paper i/N, bound σ/N (eq. 4.21)")
     parser.add_argument("--out", metavar="ATOMS.npz", help="write points and weights to this .npz file")
-    parser.add_argument("--max-atoms", type=int, default=DEFAULT_MAX_ATOMS,
-                        help=f"refuse to write more atoms than this (default {DEFAULT_MAX_ATOMS})")
-
-
-def fmt_count(n: int) -> str:
-    """An exact int if short, else scientific notation."""
-    s = str(n)
-    return s if len(s) <= 12 else f"{float(n):.3e}" if len(s) < 300 else f"~1e{len(s) - 1}"
+    parser.add_argument("--max-atoms", type=int, default=None,
+                        help="refuse to write more atoms than this (default: no count limit)")
 
 
 def compress_counts(counts, limit: int = 12) -> str:
@@ -121,6 +122,8 @@ def _write_npz(path: str, points: np.ndarray, weights: np.ndarray) -> None:
 
 
 def run(args) -> int:
+    if args.max_atoms is not None and args.max_atoms < 1:
+        raise InvalidInput(f"--max-atoms must be >= 1, got {args.max_atoms}")
     mu = load_measure(args.measure)
     q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule)
     c = RULE_CONSTANT[args.rule]
@@ -142,10 +145,7 @@ def run(args) -> int:
     else:  # pragma: no cover - the file format only makes tensor products and mixtures
         print(f"N = {fmt_count(q.n_atoms)}, bound {q.bound:.6g}")
     if args.out:
-        max_atoms = args.max_atoms
-        if max_atoms < 1:
-            raise InvalidInput(f"--max-atoms must be >= 1, got {max_atoms}")
-        atoms = q.materialize(max_atoms=max_atoms)
+        atoms = q.materialize(max_atoms=args.max_atoms)
         _write_npz(args.out, atoms.points, atoms.weights)
         print(f"wrote {atoms.n_atoms} atoms (points {atoms.points.shape}, weights) to {args.out}")
     return 0
