@@ -3,7 +3,7 @@
 Usage::
 
     kinred quantize MEASURE.toml (--eps E | --atoms N) [--rule midpoint|paper]
-                    [--out atoms.npz] [--max-atoms M]
+                    [--out atoms.npz] [--max-atoms M] [--max-bytes B]
 
 The measure file is TOML (full description in ``docs/measures-file.md``)::
 
@@ -26,8 +26,8 @@ Euclidean W1. ``--out`` writes ``points (N, d)`` and ``weights (N,)`` to an ``.n
 atom count exceeds ``--max-atoms``.
 
 Memory: the per-coordinate quantile arrays and the atom array are priced before they are
-built (:func:`kinred.quantize.preflight`); past the limit (the environment variable
-``KINRED_MAX_BYTES``, else 2 GiB) the command stops with one line
+built (:func:`kinred.quantize.preflight`); past ``--max-bytes`` (default: the environment
+variable ``KINRED_MAX_BYTES``, else 2 GiB) the command stops with one line
 ``kinred: error: TooLarge: ...`` naming the atoms, the bytes, the limit and the ε that would
 fit, and exit code 2, before any large allocation.
 """
@@ -43,7 +43,7 @@ import numpy as np
 from ..errors import InvalidInput
 from ..measures import Mixture, TensorProduct, load_measure
 from ..quantize import RULE_CONSTANT, Quantization, quantize
-from ..quantize._size import fmt_count
+from ..quantize._size import fmt_count, parse_bytes
 
 NAME = "quantize"
 HELP = "quantize a measure file (TOML) to atoms with a delayed-curse budget and W1 bounds"
@@ -60,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="ATOMS.npz", help="write points and weights to this .npz file")
     parser.add_argument("--max-atoms", type=int, default=None,
                         help="refuse to write more atoms than this (default: no count limit)")
+    parser.add_argument("--max-bytes", metavar="B", default=None,
+                        help="memory limit of every stage, e.g. 4G or 512M (default: environment "
+                             "variable KINRED_MAX_BYTES, else 2G)")
 
 
 def compress_counts(counts, limit: int = 12) -> str:
@@ -122,10 +125,11 @@ def _write_npz(path: str, points: np.ndarray, weights: np.ndarray) -> None:
 
 
 def run(args) -> int:
+    max_bytes = None if args.max_bytes is None else parse_bytes(args.max_bytes, "--max-bytes")
     if args.max_atoms is not None and args.max_atoms < 1:
         raise InvalidInput(f"--max-atoms must be >= 1, got {args.max_atoms}")
     mu = load_measure(args.measure)
-    q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule)
+    q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule, max_bytes=max_bytes)
     c = RULE_CONSTANT[args.rule]
     target = f"eps = {args.eps:g}" if args.eps is not None else f"atoms ≤ {args.atoms}"
     print(f"measure   {args.measure}: {type(mu).__name__}, d = {mu.dim}")
@@ -145,7 +149,7 @@ def run(args) -> int:
     else:  # pragma: no cover - the file format only makes tensor products and mixtures
         print(f"N = {fmt_count(q.n_atoms)}, bound {q.bound:.6g}")
     if args.out:
-        atoms = q.materialize(max_atoms=args.max_atoms)
+        atoms = q.materialize(max_atoms=args.max_atoms, max_bytes=max_bytes)
         _write_npz(args.out, atoms.points, atoms.weights)
         print(f"wrote {atoms.n_atoms} atoms (points {atoms.points.shape}, weights) to {args.out}")
     return 0
