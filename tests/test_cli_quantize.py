@@ -17,6 +17,7 @@ EXAMPLES = ROOT / "examples" / "measures"
 @pytest.fixture(autouse=True)
 def _commands(monkeypatch):
     monkeypatch.setattr(cli, "COMMAND_MODULES", ("kinred.commands.quantize", "kinred.commands.demo"))
+    monkeypatch.delenv("KINRED_MAX_BYTES", raising=False)  # the documented default limit, 2 GiB
 
 
 def _write(tmp_path, text, name="m.toml"):
@@ -74,8 +75,15 @@ def test_refuses_too_many_atoms(tmp_path, capsys):
     code = cli.main(["quantize", str(EXAMPLES / "decaying-200.toml"), "--eps", "0.1", "--out", str(out)])
     assert code == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "TooLarge" in err and "max_atoms" in err
+    # the 3.3e24 atoms are refused by the memory limit, which names what would fit instead
+    assert err.count("\n") == 1 and "TooLarge" in err and "3.297e+24 atoms" in err
+    assert "max_bytes = 2 GiB" in err and "eps >= " in err and "iter_chunks" in err
     assert not out.exists()
+    # an explicit count limit is honoured too
+    code = cli.main(["quantize", str(EXAMPLES / "decaying-200.toml"), "--eps", "0.1", "--out", str(out),
+                     "--max-atoms", "1000"])
+    err = capsys.readouterr().err
+    assert code == 2 and "max_atoms=1000" in err and not out.exists()
 
 
 @pytest.mark.parametrize("body,needle", [
@@ -114,3 +122,55 @@ def test_python_m_kinred_quantize(tmp_path):
     r = subprocess.run([sys.executable, "-m", "kinred", "quantize", bad, "--eps", "0.1"],
                        capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "unknown distribution" in r.stderr
+
+
+# ------------------------------------------------------------------ sizes (issue 14)
+# A wrapper process runs the command and reports the command's own peak RSS, so the figure
+# is not the maximum over every child this test session has waited for.
+_RSS = (
+    "import resource, subprocess, sys, time\n"
+    "t = time.perf_counter()\n"
+    "r = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+    "print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, "
+    "time.perf_counter() - t)\n"
+    "sys.stderr.write(r.stderr)\n"
+)
+
+UNIFORM200 = '[[coordinate]]\ndist = "uniform"\nparams = {loc = 0.0, scale = 1.0}\nrepeat = 200\n'
+
+
+@pytest.mark.parametrize("case,eps", [("uniform-200", "1e-12"), ("decaying-200", "1e-6"),
+                                      ("decaying-200", "1e-300")])
+def test_tiny_eps_answers_too_large_in_seconds_with_little_memory(tmp_path, case, eps):
+    """Defects 3 and 4 through the command: a raw traceback (rc 1), then 18.6 GB in 60 s."""
+    f = _write(tmp_path, UNIFORM200) if case == "uniform-200" else str(EXAMPLES / "decaying-200.toml")
+    env = {k: v for k, v in os.environ.items() if k != "KINRED_MAX_BYTES"}
+    cmd = [sys.executable, "-m", "kinred", "quantize", f, "--eps", eps]
+    r = subprocess.run([sys.executable, "-c", _RSS, *cmd], capture_output=True, text=True, cwd=ROOT, env=env,
+                       timeout=300)
+    code, rss_kib, seconds = r.stdout.split()
+    assert int(code) == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("kinred: error: TooLarge: ")
+    assert f"quantize(eps={float(eps):g}) would allocate" in r.stderr and "eps >= " in r.stderr
+    assert "max_bytes = 2 GiB" in r.stderr and "atoms in dimension 200" in r.stderr
+    # ~7 s and ~170 MB (interpreter, numpy, scipy) measured on a loaded 2-core machine
+    assert int(rss_kib) < 500 * 1024 and float(seconds) < 100
+
+
+def test_max_bytes_option_is_the_limit(tmp_path, capsys, monkeypatch):
+    from kinred.measures import load_measure
+    from kinred.quantize import preflight
+
+    f = str(EXAMPLES / "decaying-200.toml")
+    need = preflight(load_measure(f), eps=1e-3).quantize_bytes
+    assert cli.main(["quantize", f, "--eps", "1e-3", "--max-bytes", str(need - 1)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "TooLarge" in err and "eps >= " in err
+    assert cli.main(["quantize", f, "--eps", "1e-3", "--max-bytes", str(need)]) == 0
+    monkeypatch.setenv("KINRED_MAX_BYTES", str(need - 1))  # the environment, when no option
+    assert cli.main(["quantize", f, "--eps", "1e-3"]) == 2
+    assert "TooLarge" in capsys.readouterr().err
+    assert cli.main(["quantize", f, "--eps", "1e-3", "--max-bytes", "2G"]) == 0
+    capsys.readouterr()
+    assert cli.main(["quantize", f, "--eps", "0.1", "--max-bytes", "a lot"]) == 2
+    assert "--max-bytes must be a byte count" in capsys.readouterr().err

@@ -3,7 +3,7 @@
 Usage::
 
     kinred quantize MEASURE.toml (--eps E | --atoms N) [--rule midpoint|paper]
-                    [--out atoms.npz] [--max-atoms M]
+                    [--out atoms.npz] [--max-atoms M] [--max-bytes B]
 
 The measure file is TOML (full description in ``docs/measures-file.md``)::
 
@@ -25,6 +25,12 @@ Euclidean W1. ``--out`` writes ``points (N, d)`` and ``weights (N,)`` to an ``.n
 (:func:`kinred.io.atomic_write_npz`: temporary file in the same folder, then ``os.replace``;
 permissions follow the umask); it refuses an existing directory or a missing folder before
 quantizing, and when the atom count exceeds ``--max-atoms``.
+
+Memory: the per-coordinate quantile arrays and the atom array are priced before they are
+built (:func:`kinred.quantize.preflight`); past ``--max-bytes`` (default: the environment
+variable ``KINRED_MAX_BYTES``, else 2 GiB) the command stops with one line
+``kinred: error: TooLarge: ...`` naming the atoms, the bytes, the limit and the ε that would
+fit, and exit code 2, before any large allocation.
 """
 
 from __future__ import annotations
@@ -37,7 +43,8 @@ import numpy as np
 from ..errors import InvalidInput
 from ..io import atomic_write_npz
 from ..measures import Mixture, TensorProduct, load_measure
-from ..quantize import DEFAULT_MAX_ATOMS, RULE_CONSTANT, Quantization, quantize
+from ..quantize import RULE_CONSTANT, Quantization, quantize
+from ..quantize._size import fmt_count, parse_bytes
 
 NAME = "quantize"
 HELP = "quantize a measure file (TOML) to atoms with a delayed-curse budget and W1 bounds"
@@ -52,14 +59,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="quantile levels: midpoint (2i-1)/(2N), bound σ/(2N), default; "
                              "paper i/N, bound σ/N (eq. 4.21)")
     parser.add_argument("--out", metavar="ATOMS.npz", help="write points and weights to this .npz file")
-    parser.add_argument("--max-atoms", type=int, default=DEFAULT_MAX_ATOMS,
-                        help=f"refuse to write more atoms than this (default {DEFAULT_MAX_ATOMS})")
-
-
-def fmt_count(n: int) -> str:
-    """An exact int if short, else scientific notation."""
-    s = str(n)
-    return s if len(s) <= 12 else f"{float(n):.3e}" if len(s) < 300 else f"~1e{len(s) - 1}"
+    parser.add_argument("--max-atoms", type=int, default=None,
+                        help="refuse to write more atoms than this (default: no count limit)")
+    parser.add_argument("--max-bytes", metavar="B", default=None,
+                        help="memory limit of every stage, e.g. 4G or 512M (default: environment "
+                             "variable KINRED_MAX_BYTES, else 2G)")
 
 
 def compress_counts(counts, limit: int = 12) -> str:
@@ -123,8 +127,11 @@ def _write_npz(path: str, points: np.ndarray, weights: np.ndarray) -> None:
 def run(args) -> int:
     if args.out:
         _check_out(args.out)
+    max_bytes = None if args.max_bytes is None else parse_bytes(args.max_bytes, "--max-bytes")
+    if args.max_atoms is not None and args.max_atoms < 1:
+        raise InvalidInput(f"--max-atoms must be >= 1, got {args.max_atoms}")
     mu = load_measure(args.measure)
-    q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule)
+    q = quantize(mu, eps=args.eps, atoms=args.atoms, rule=args.rule, max_bytes=max_bytes)
     c = RULE_CONSTANT[args.rule]
     target = f"eps = {args.eps:g}" if args.eps is not None else f"atoms ≤ {args.atoms}"
     print(f"measure   {args.measure}: {type(mu).__name__}, d = {mu.dim}")
@@ -144,10 +151,7 @@ def run(args) -> int:
     else:  # pragma: no cover - the file format only makes tensor products and mixtures
         print(f"N = {fmt_count(q.n_atoms)}, bound {q.bound:.6g}")
     if args.out:
-        max_atoms = args.max_atoms
-        if max_atoms < 1:
-            raise InvalidInput(f"--max-atoms must be >= 1, got {max_atoms}")
-        atoms = q.materialize(max_atoms=max_atoms)
+        atoms = q.materialize(max_atoms=args.max_atoms, max_bytes=max_bytes)
         _write_npz(args.out, atoms.points, atoms.weights)
         print(f"wrote {atoms.n_atoms} atoms (points {atoms.points.shape}, weights) to {args.out}")
     return 0

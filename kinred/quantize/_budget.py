@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
 from .._validate import as_array, as_choice, as_float, as_int
 from ..errors import InvalidInput
+from ._size import fmt_count
 
 __all__ = ["Budget", "Recipe", "budget", "paper_recipe", "RULE_CONSTANT"]
 
@@ -17,6 +19,20 @@ __all__ = ["Budget", "Recipe", "budget", "paper_recipe", "RULE_CONSTANT"]
 RULE_CONSTANT = {"midpoint": 0.5, "paper": 1.0}
 
 _TOL = 1e-12
+#: Largest ``d · Σ c σⱼ / ε`` the floating-point search accepts (every N_j stays below it).
+_MAX_SCALE = 1e305
+#: Counts above which a ±1 change of N_j is not resolved by a float sum (no unit trades there).
+_UNIT_STEP = 2**30
+
+
+def _ceil_ratio(x: float, y: Fraction) -> int:
+    """``max(1, ⌈x / y⌉)`` in exact arithmetic, for any float ``x`` and rational ``y > 0``."""
+    return max(1, math.ceil(Fraction(x) / y))
+
+
+def _ratio(x: float, n: int) -> float:
+    """``x / n`` for an integer ``n`` of any size (float division overflows past 1e308)."""
+    return x / n if n.bit_length() < 1000 else float(Fraction(x) / n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,6 +50,10 @@ class Recipe:
     n_common: int
     n_atoms: int
     bound: float
+
+    def __repr__(self) -> str:
+        return (f"Recipe(eps={self.eps!r}, k_bar={self.k_bar}, n_common={fmt_count(self.n_common)}, "
+                f"n_atoms={fmt_count(self.n_atoms)}, bound={self.bound!r})")
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,11 +94,9 @@ class Budget:
         """One short line whatever ``d`` and ``N``: the target, ``N`` (exact up to 15 digits,
         else in scientific notation from its digits), the bound, ``k̄``, and the first and
         last widths and counts around an ellipsis."""
-        from ._quantization import _fmt_count
-
-        target = f"eps={self.eps:.6g}" if self.eps is not None else f"atoms={_fmt_count(self.atoms)}"
+        target = f"eps={self.eps:.6g}" if self.eps is not None else f"atoms={fmt_count(self.atoms)}"
         return (f"Budget(d={len(self.counts)}, {target}, rule={self.rule!r}, "
-                f"n_atoms={_fmt_count(self.n_atoms)}, bound={self.bound:.6g}, k_bar={self.k_bar}, "
+                f"n_atoms={fmt_count(self.n_atoms)}, bound={self.bound:.6g}, k_bar={self.k_bar}, "
                 f"counts={_ends(self.counts, str)}, widths={_ends(self.widths, '{:.3g}'.format)}, "
                 f"optimal={self.optimal})")
 
@@ -111,10 +129,29 @@ def paper_recipe(widths, eps: float, *, rule: str = "midpoint") -> Recipe:
     if k_bar == 0:
         return Recipe(eps, 0, 1, 1, float(tail[0]))
     head = float(s[:k_bar].sum())
-    n = max(1, math.ceil(head / (eps / 2) * (1 - _TOL)))
-    while head / n > eps / 2 * (1 + _TOL):
-        n += 1
-    return Recipe(eps, k_bar, n, n**k_bar, head / n + float(tail[k_bar]))
+    n = _ceil_ratio(head, Fraction(eps) / 2 * Fraction(1 + _TOL))  # exact for any ε
+    return Recipe(eps, k_bar, n, n**k_bar, _ratio(head, n) + float(tail[k_bar]))
+
+
+def _check_scale(s: np.ndarray, eps: float) -> None:
+    """Refuse an ε so small that the counts leave the float range of the search (N_j ≤ d Σ s / ε)."""
+    total = float(s.sum()) * s.size
+    if total / eps > _MAX_SCALE:
+        raise InvalidInput(
+            f"eps={eps!r} is too small for these widths: counts per coordinate could reach "
+            f"{s.size} × {float(s.sum()):.6g} / eps = {total / eps:.3g}, beyond the floating-point "
+            f"range of the budget search ({_MAX_SCALE:.0e}); eps must be >= {total / _MAX_SCALE:.3g}"
+        )
+
+
+def _check_atoms_scale(s: np.ndarray, atoms: int, nu: float) -> None:
+    """Refuse an atom budget whose relaxed count of the widest coordinate, s₀/ν, leaves the float range."""
+    if nu == 0 or float(s[0]) / nu > _MAX_SCALE:
+        raise InvalidInput(
+            f"atoms={fmt_count(atoms)} is too large for {s.size} coordinate(s) of these widths: the "
+            f"widest coordinate alone would get more than {_MAX_SCALE:.0e} atoms, beyond the "
+            "floating-point range of the budget search; ask for fewer atoms"
+        )
 
 
 def _widths(widths) -> np.ndarray:
@@ -135,10 +172,11 @@ class _Solver:
     """Branch and bound over non-increasing integer vectors for decreasing s > 0."""
 
     def __init__(self, s: np.ndarray, node_limit: int):
-        self.s = s
+        # Python floats: the search is scalar code, and numpy scalars cost several times more
+        self.s = s.tolist()
         self.d = s.size
-        self.T = np.concatenate([np.cumsum(s[::-1])[::-1], [0.0]])
-        self.L = np.concatenate([[0.0], np.cumsum(np.log(s))])
+        self.T = np.concatenate([np.cumsum(s[::-1])[::-1], [0.0]]).tolist()
+        self.L = np.concatenate([[0.0], np.cumsum(np.log(s))]).tolist()
         self.nodes = 0
         self.node_limit = node_limit
 
@@ -185,9 +223,7 @@ class _Solver:
         if self.best_P - 1 < prod * 2:
             return
         thresh = math.log(self.best_P - 1) + 1e-9
-        lo = max(2, math.ceil(T[j] / e * (1 - 1e-12)))
-        while T[j] / lo > e * (1 + _TOL):
-            lo += 1
+        lo = max(2, _ceil_ratio(T[j], Fraction(e) * Fraction(1 + _TOL)))  # N_j ≥ T_j / e (exact)
         hi = (self.best_P - 1) // prod
         if cap is not None:
             hi = min(hi, cap)
@@ -225,14 +261,13 @@ class _Solver:
             self._dfs_eps(j + 1, e - s[j] / n, n, prod * n, path + [n])
 
     # ---- atoms mode: min Σ s/N s.t. Π N ≤ P ------------------------------------------------
-    def cont_atoms(self, j: int, R: float) -> tuple[float, float]:
-        """Continuous relaxation on suffix j with product ≤ R: (min Σ s_i/N_i, ν); N_i = max(1, s_i/ν)."""
+    def cont_atoms(self, j: int, logR: float) -> tuple[float, float]:
+        """Continuous relaxation on suffix j with product ≤ e^logR: (min Σ s_i/N_i, ν), N_i = max(1, s_i/ν)."""
         T, s, d = self.T, self.s, self.d
         if j >= d:
             return 0.0, math.inf
-        if R <= 1 + 1e-15:
+        if logR <= 1e-15:
             return float(T[j]), math.inf
-        logR = math.log(R)
         for m in range(1, d - j + 1):
             nu = math.exp((self.L[j + m] - self.L[j] - logR) / m)
             if s[j + m - 1] >= nu * (1 - 1e-12) and (j + m == d or s[j + m] <= nu * (1 + 1e-12)):
@@ -249,7 +284,7 @@ class _Solver:
             return self.best, False
 
     def value(self, N) -> float:
-        return float(sum(si / ni for si, ni in zip(self.s, N)))
+        return float(sum(_ratio(si, ni) for si, ni in zip(self.s, N)))
 
     def _dfs_atoms(self, j, R, cap, cur, path):
         self._tick()
@@ -262,16 +297,19 @@ class _Solver:
         thresh = self.best_v * (1 - 1e-13)
         hi = R if cap is None else min(cap, R)
         if j == self.d - 1:
-            v = cur + s[j] / hi
+            v = cur + _ratio(s[j], hi)
             if v < thresh:
                 self.best_v, self.best = v, path + [hi]
             return
-        _, nu = self.cont_atoms(j, R)
-        start = min(max(int(s[j] / nu) if nu > 0 and math.isfinite(nu) else 1, 1), hi)
+        logR = math.log(R)
+        _, nu = self.cont_atoms(j, logR)
+        x = float(s[j]) / nu if 0 < nu < math.inf else 1.0  # a Python float: compares with any int
+        start = hi if x >= hi else min(max(int(x), 1), hi)
 
         def f(n):
             self._tick()
-            return cur + s[j] / n + max(self.cont_atoms(j + 1, R / n)[0], float(T[j + 1]) / n)
+            rest = self.cont_atoms(j + 1, logR - math.log(n))[0]
+            return cur + _ratio(s[j], n) + max(rest, _ratio(float(T[j + 1]), n))
 
         cands = []
         n = start
@@ -291,39 +329,49 @@ class _Solver:
         for v, n in sorted(cands):
             if v >= self.best_v * (1 - 1e-13):
                 continue
-            self._dfs_atoms(j + 1, R // n, n, cur + s[j] / n, path + [n])
+            self._dfs_atoms(j + 1, R // n, n, cur + _ratio(s[j], n), path + [n])
 
 
-def _local_eps(s, N, eps):
-    """Local improvement: drop atoms while feasible, then trade (N_i−1, N_j+1) pairs."""
+def _local_eps(s, N, eps, max_moves):
+    """Local improvement: lower each N_j as far as the bound allows, then trade (N_i−1, N_j+1).
+
+    Lowering is in closed form (one step per coordinate, whatever the size of N_j); unit trades
+    are tried only where N_j ≤ 2**30 (a float sum resolves them) and at most ``max_moves``
+    times, so the cost does not grow with the counts.
+    """
+    lim = eps * (1 + _TOL)
     N = list(N)
-    tot = sum(si / ni for si, ni in zip(s, N))
+    moves = 0
     changed = True
     while changed:
         changed = False
+        tot = math.fsum(si / ni for si, ni in zip(s, N))
         for j in sorted(range(len(N)), key=lambda i: N[i]):
-            while N[j] > 1:
-                new = tot - s[j] / N[j] + s[j] / (N[j] - 1)
-                if new <= eps * (1 + _TOL):
-                    tot, N[j] = new, N[j] - 1
+            room = lim - (tot - s[j] / N[j])  # what coordinate j may spend
+            if N[j] > 1 and room > s[j] / N[j]:
+                n = min(N[j], _ceil_ratio(s[j], Fraction(room)))  # least n with s_j/n ≤ room
+                if n < N[j]:
+                    tot, N[j] = tot - s[j] / N[j] + s[j] / n, n
                     changed = True
-                else:
-                    break
-        act = [i for i in range(len(N)) if N[i] > 1]
+        act = [i for i in range(len(N)) if 1 < N[i] <= _UNIT_STEP]
         for i in act:
             for j in act:
-                if i != j and 1 < N[i] <= N[j]:  # (N_i - 1)(N_j + 1) < N_i N_j
+                if i != j and 1 < N[i] <= N[j] and moves < max_moves:  # (N_i−1)(N_j+1) < N_i N_j
                     new = tot - s[i] / N[i] + s[i] / (N[i] - 1) - s[j] / N[j] + s[j] / (N[j] + 1)
-                    if new <= eps * (1 + _TOL):
+                    if new <= lim:
                         tot = new
                         N[i] -= 1
                         N[j] += 1
+                        moves += 1
                         changed = True
     return N
 
 
 def _round_eps(s, eps, mu):
     """Smallest scaling t ≤ 1 of the continuous solution whose ceiling is still feasible."""
+    if not 0 < mu < math.inf:  # numerical corner of the relaxation: μ = d/ε is always feasible
+        mu = len(s) / eps
+
     def vec(t):
         return [max(1, math.ceil(t * mu * si - 1e-9)) for si in s]
 
@@ -345,10 +393,16 @@ def _round_eps(s, eps, mu):
 
 def _floor_atoms(s, P, nu):
     """Round the continuous optimum ``N_j = max(1, s_j/ν)`` down (feasible: ∏ ≤ P)."""
-    N = [max(1, int(math.floor(sj / nu * (1 + 1e-12)))) if math.isfinite(nu) else 1 for sj in s]
-    while math.prod(N) > P:  # guard against rounding up by the tolerance
+    N = []
+    for sj in s:
+        x = math.inf if nu == 0 else float(sj) / nu * (1 + 1e-12) if nu < math.inf else 1.0
+        N.append(P if x >= P else max(1, int(x)))
+    prod = math.prod(N)
+    while prod > P:  # the tolerance rounded up: lower the largest N_j just enough
         j = max(range(len(N)), key=lambda i: N[i])
-        N[j] -= 1
+        rest = prod // N[j]
+        N[j] = max(1, P // rest)
+        prod = rest * N[j]
     return N
 
 
@@ -358,8 +412,10 @@ def _pairs(N):
     return act, act + ([nxt] if nxt is not None else [])
 
 
-def _local_atoms(s, N, P):
+def _local_atoms(s, N, P, max_moves):
+    """Local improvement: raise N_j while ∏ ≤ P, then trade pairs (at most ``max_moves``)."""
     N = list(N)
+    moves = 0
     changed = True
     while changed:
         changed = False
@@ -378,11 +434,13 @@ def _local_atoms(s, N, P):
                 if i == j or N[i] < 2:
                     continue
                 for di, dj in ((N[i] - 1, N[j] + 1), (N[i] // 2, N[j] * 2)):
-                    if di < 1:
+                    if di < 1 or moves >= max_moves:
                         continue
                     p2 = prod // (N[i] * N[j]) * di * dj
-                    if p2 <= P and s[i] / di + s[j] / dj < s[i] / N[i] + s[j] / N[j] - 1e-15:
+                    old = _ratio(s[i], N[i]) + _ratio(s[j], N[j])
+                    if p2 <= P and _ratio(s[i], di) + _ratio(s[j], dj) < old - 1e-15:
                         N[i], N[j], prod = di, dj, p2
+                        moves += 1
                         changed = True
     return N
 
@@ -410,13 +468,21 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
     is the best vector found (never worse than the paper's recipe) and ``lower_bound`` bounds
     the gap. Coordinates with σⱼ = 0 cost one atom.
 
+    Cost: the counts are exact Python integers of any size and nothing loops once per atom
+    (lowering a count is done in closed form, unit trades only where a float sum resolves
+    them), so ``eps=1e-300`` on 200 coordinates (counts of 58 000 digits) takes about as long
+    as ``eps=0.1``. The search works in floating point, so it refuses (``InvalidInput``) an
+    ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would give one coordinate more
+    than 1e305 atoms.
+
     Parameters
     ----------
     widths : (d,) array_like -- σⱼ ≥ 0
     eps : float, optional -- target bound (> 0)
     atoms : int, optional -- atom budget (≥ 1); give exactly one of eps and atoms
     rule : {"midpoint", "paper"}
-    node_limit : int -- branch-and-bound nodes before giving up the optimality proof
+    node_limit : int -- branch-and-bound nodes before giving up the optimality proof (also the
+        most trades the local improvement makes)
 
     Returns
     -------
@@ -445,16 +511,17 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
     counts = [1] * d
     if eps is not None:
         eps = as_float(eps, "eps", low=0.0, low_open=True)
+        _check_scale(s, eps)
         recipe = paper_recipe(w, eps, rule=rule)
         if s.size == 0 or s.sum() <= eps * (1 + _TOL):
             nodes, optimal, lower, N = 0, True, 1.0, [1] * s.size
         else:
             solver = _Solver(s, node_limit)
             logLB, mu = solver.cont_eps(0, eps)
-            cand = _local_eps(s, _round_eps(s, eps, mu), eps)
+            cand = _local_eps(solver.s, _round_eps(solver.s, eps, mu), eps, node_limit)
             rec = [recipe.n_common] * recipe.k_bar + [1] * (s.size - recipe.k_bar)
             if math.prod(rec) < math.prod(cand):
-                cand = _local_eps(s, rec, eps)
+                cand = _local_eps(solver.s, rec, eps, node_limit)
             cand = sorted(cand, reverse=True)  # some optimum is non-increasing along s
             N, optimal = solver.solve_eps(eps, cand)
             nodes = solver.nodes
@@ -466,13 +533,15 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
             N, optimal, nodes, lower = [], True, 0, 0.0
         else:
             solver = _Solver(s, node_limit)
-            lower, nu = solver.cont_atoms(0, float(atoms))
-            cand = sorted(_local_atoms(s, _floor_atoms(s, atoms, nu), atoms), reverse=True)
+            lower, nu = solver.cont_atoms(0, math.log(atoms))
+            _check_atoms_scale(s, atoms, nu)
+            cand = sorted(_local_atoms(solver.s, _floor_atoms(solver.s, atoms, nu), atoms, node_limit),
+                          reverse=True)
             N, optimal = solver.solve_atoms(atoms, cand)
             nodes = solver.nodes
     for p, n in zip(pos, N):
         counts[int(p)] = int(n)
-    bound = float(sum(c * wi / ni for wi, ni in zip(w, counts)))
+    bound = float(sum(_ratio(c * wi, ni) for wi, ni in zip(w, counts)))
     if atoms is not None:
         recipe = paper_recipe(w, bound, rule=rule) if bound > 0 else Recipe(0.0, 0, 1, 1, 0.0)
     n_atoms = math.prod(counts)
