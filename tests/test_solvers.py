@@ -16,6 +16,7 @@ from kinred.integrate import (BS32, DOPRI5, EULER, METHODS, RK4, SOLVERS, TABLES
                               ConstantStep, ExplicitRK, RKTable, SaveAt, StepState,
                               register_solver, simulate, unregister_solver)
 from kinred.observables import centre, gamma
+from kinred.pairsum import Numpy
 
 from test_run_cli import BASE
 
@@ -282,35 +283,49 @@ def test_observers_validation(bad):
 
 # ---------------------------------------------------------------- the generator reaches f
 
-class Jittered(Scene):
-    """A scene whose drift draws from the run's generator (like a stochastic pair sum)."""
+class JitterBackend(Numpy):
+    """A stochastic pair-sum backend: exact pair sums plus a draw from the run's generator."""
 
-    seen: list
+    stochastic = True
 
-    def _rhs(self, x, v, t, rng=None):
-        self.seen.append(rng)
-        dx, dv = super()._rhs(x, v, t, rng)
-        return dx, dv + 1e-3 * rng.standard_normal(dv.shape)
+    def __init__(self):
+        super().__init__()
+        self.rngs = []
+
+    def evaluate(self, plan, x, v, rng=None):
+        self.rngs.append(rng)
+        out = super().evaluate(plan, x, v, rng)
+        if self.stochastic:
+            out["v"] = out["v"] + 1e-3 * rng.standard_normal(out["v"].shape)
+        return out
 
 
-def test_run_generator_reaches_the_drift():
+def test_run_generator_reaches_a_stochastic_pair_sum():
     rng = np.random.default_rng(3)
     x0, v0 = rng.uniform(0, 1, (5, 2)), rng.uniform(-1, 1, (5, 2))
-    sc = Jittered([Alignment(CuckerSmale(1.0, 1.0))])
-    sc.seen = []
+    back = JitterBackend()
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.0))], pairsum=back)
     g = np.random.default_rng(11)
     a = simulate(sc, x0, v0, (0, 1), 0.1, method="rk4", seed=g, save=SaveAt(states=True))
-    assert len(sc.seen) == a.n_rhs_evals == 40 and all(r is g for r in sc.seen)
+    assert len(back.rngs) == a.n_rhs_evals == 40 and all(r is g for r in back.rngs)
     b = simulate(sc, x0, v0, (0, 1), 0.1, method="rk4", seed=11, save=SaveAt(states=True))
     c = simulate(sc, x0, v0, (0, 1), 0.1, method="rk4", seed=12, save=SaveAt(states=True))
     assert np.array_equal(a.v, b.v) and not np.array_equal(a.v, c.v)
-    # with noise, Euler–Maruyama draws the drift's numbers first, then the increments
-    sc = Jittered([Alignment(CuckerSmale(1.0, 1.0)), Noise(0.5)])
-    sc.seen = []
+    # an exact backend in a scene without noise gets rng=None (the deterministic drift)
+    back.stochastic = False
+    back.rngs = []
+    simulate(sc, x0, v0, (0, 1), 0.1, method="heun", seed=1)
+    assert back.rngs == [None] * 20
+
+
+def test_euler_maruyama_draws_the_drift_then_the_increments():
+    rng = np.random.default_rng(4)
+    x0, v0 = rng.uniform(0, 1, (5, 2)), rng.uniform(-1, 1, (5, 2))
+    sc = Scene([Alignment(CuckerSmale(1.0, 1.0)), Noise(0.5)], pairsum=JitterBackend())
     tr = simulate(sc, x0, v0, (0, 0.2), 0.1, method="euler_maruyama", seed=5,
                   save=SaveAt(states=True))
     g, x, v = np.random.default_rng(5), x0 - centre(x0, np.full(5, 0.2)), v0.copy()
-    plain = Scene([Alignment(CuckerSmale(1.0, 1.0))])
+    plain = Scene([Alignment(CuckerSmale(1.0, 1.0))], pairsum="numpy")
     for n in range(2):
         dx, dv = plain._rhs(x, v, 0.1 * n)
         dv = dv + 1e-3 * g.standard_normal(dv.shape)

@@ -76,7 +76,7 @@ class _Run:
     solver: Any
     control: Any            # the controller's run state
     f: VectorField
-    rng: np.random.Generator
+    rng: np.random.Generator | None
     grid: SaveGrid
     record: Recorder
     check: DivergenceCheck
@@ -124,8 +124,10 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     save : SaveAt, optional
         Default ``SaveAt()`` (observables every step, no states).
     seed : None, int, SeedSequence or Generator
-        Randomness of the run: the noise increments (Euler–Maruyama) and the drift's
-        (stochastic pair sums); deterministic scenes draw nothing from it.
+        Randomness of the run, converted once into one generator: the noise increments
+        (Euler–Maruyama) draw from it, and the drift receives it (``scene._rhs(x, v, t,
+        rng)``) when the scene has noise or its pair-sum backend has a true ``stochastic``
+        attribute; other scenes are deterministic and their drift gets ``rng=None``.
     progress : bool
         Show a tqdm progress bar (steps for fixed-step methods; the time reached out of
         ``t1 − t0``, with its rate and remaining time, for adaptive ones).
@@ -243,6 +245,8 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
         raise InvalidInput(f"save must be a SaveAt, got {save!r}")
     adaptive = AdaptiveStep(rtol=rtol, atol=atol, max_steps=max_steps)
     rng = as_generator(seed)
+    if not (scene.stochastic or getattr(scene.pairsum, "stochastic", False) is True):
+        rng = None              # deterministic scenes: the drift gets rng=None
     obs = observable_list(save.observables, scene.order)
     w = scene.agent_weights(x0.shape[0])
     solver = spec.make()
