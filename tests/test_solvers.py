@@ -274,6 +274,24 @@ def test_observer_state_is_read_only_and_first_order_has_no_v():
     assert seen[0][0] is None and np.allclose(seen[0][1], np.full(3, 1 / 3), rtol=1e-15)
 
 
+def test_a_callable_observer_object_is_called_and_init_comes_first():
+    calls = []
+
+    class Both:
+        def init(self, t0, state, scene):
+            calls.append(("init", state.step, t0))
+
+        def __call__(self, t, state, scene):
+            calls.append(("call", state.step, t))
+
+        def update(self, t, state):                  # another signature: not the hook
+            raise AssertionError("update must not be called on a callable observer")
+
+    simulate(Scene([Alignment()]), np.zeros((2, 1)), np.ones((2, 1)), (0, 0.5), 0.25,
+             observers=Both())
+    assert calls == [("init", 0, 0.0), ("call", 1, 0.25), ("call", 2, 0.5)]
+
+
 @pytest.mark.parametrize("bad", [42, [print, "x"], [object()]])
 def test_observers_validation(bad):
     with pytest.raises(InvalidInput, match="observer"):

@@ -1,8 +1,8 @@
 r"""Per-step observers: quantities that need every accepted step, outside the loop's code.
 
-An observer is a callable ``obs(t, state, scene)`` or an object with an optional
-``init(t0, state, scene)`` (called once at ``t0``) and ``update(t, state, scene)`` or
-``__call__`` (called after every accepted step, once its divergence checks passed).
+An observer is a callable ``obs(t, state, scene)`` (or, if not callable, an object with
+``update(t, state, scene)``), called after every accepted step once its divergence checks
+passed, with an optional ``init(t0, state, scene)`` called once at ``t0``.
 ``state`` is a :class:`StepState`, a small read-only view of the integrator's working arrays.
 Error certificates, energies or custom diagnostics are observers; so is the progress bar.
 
@@ -68,9 +68,9 @@ class StepState(NamedTuple):
 class Observer(Protocol):
     """A per-step observer of :func:`simulate`.
 
-    A callable ``obs(t, state, scene)``, or an object with ``update(t, state, scene)`` (used
-    instead of ``__call__`` when present) and optionally ``init(t0, state, scene)``, called
-    once at ``t0`` before the first step. ``update`` is called after every accepted step,
+    A callable ``obs(t, state, scene)`` or an object with ``update(t, state, scene)`` (used
+    when the object is not callable), and optionally ``init(t0, state, scene)``, called once
+    at ``t0`` before the first step. ``update`` is called after every accepted step,
     once the step passed the divergence checks and was recorded; ``state`` is a read-only
     :class:`StepState`. An exception raised by an observer propagates unchanged (an
     observer may stop a run).
@@ -106,8 +106,8 @@ def as_observers(observers) -> list:
                            f"{observers!r}") from None
     out = []
     for i, o in enumerate(items):
-        update = getattr(o, "update", None)
-        update = update if callable(update) else (o if callable(o) else None)
+        update = o if callable(o) else getattr(o, "update", None)
+        update = update if callable(update) else None
         init = getattr(o, "init", None)
         if update is None or (init is not None and not callable(init)):
             raise InvalidInput(f"observers[{i}] = {o!r} is not an observer: it must be callable "

@@ -137,10 +137,11 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         Budget of accepted plus rejected steps of adaptive methods; default
         ``max(100 000, 1000·⌈(t1 − t0)/dt⌉)``.
     observers : callable, object or sequence of them, optional
-        Called after every accepted step as ``obs(t, state, scene)`` (or ``obs.update``;
-        ``obs.init(t0, state, scene)`` first if present), ``state`` a read-only
-        :class:`~kinred.integrate.StepState` (``.t``, ``.x``, ``.v``, ``.shift``, ``.step``,
-        ``.h``): for quantities that need every step (certificates, energies, diagnostics).
+        Called after every accepted step as ``obs(t, state, scene)`` (``obs.update`` if
+        ``obs`` is not callable; ``obs.init(t0, state, scene)`` first if present), ``state``
+        a read-only :class:`~kinred.integrate.StepState` (``.t``, ``.x``, ``.v``,
+        ``.shift``, ``.step``, ``.h``): for quantities that need every step (certificates,
+        energies, diagnostics).
 
     Returns
     -------
