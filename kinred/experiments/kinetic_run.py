@@ -300,12 +300,13 @@ def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False
     kind = pr.get("kind", "gaussian")
     if kind not in KINDS:
         raise ConfigError(f"{source}: projection.kind: must be one of {', '.join(KINDS)}, got {kind!r}")
-    from ..integrate import METHODS
+    from ..integrate import SOLVERS
 
     method = it.get("method", "euler")
-    if method not in METHODS or method == "euler_maruyama":
+    methods = [m for m, spec in SOLVERS.items() if not spec.stochastic]   # scene files: no noise
+    if method not in methods:
         raise ConfigError(f"{source}: integrate.method: must be one of "
-                          f"{', '.join(m for m in METHODS if m != 'euler_maruyama')}, got {method!r}")
+                          f"{', '.join(methods)}, got {method!r}")
     dt, tf = it["dt"], it["t_final"]
     if not dt > 0 or not tf > 0:
         raise ConfigError(f"{source}: integrate.dt: dt and t_final must be > 0, got dt={dt}, "

@@ -1,7 +1,26 @@
-"""Integrators: explicit RK tables, adaptive embedded pairs, Euler–Maruyama, ``simulate``."""
+"""Integrators as objects (Diffrax style): solvers, step-size controllers, the save grid,
+per-step observers, and ``simulate``, the short loop that joins them.
 
-from ._simulate import METHODS, SaveAt, Trajectory, simulate
+* solvers (:class:`Solver`: ``init``/``step``): :class:`ExplicitRK` from a Butcher table
+  (:data:`EULER`, :data:`HEUN`, :data:`RK4`, :data:`DOPRI5`, :data:`BS32`),
+  :class:`EulerMaruyama` for noise;
+* controllers: :class:`ConstantStep`, :class:`AdaptiveStep` (tolerances, step floor, step
+  budget, stiffness test);
+* :class:`SaveAt`: what to record and when; observers (:class:`Observer`) see every accepted
+  step as a :class:`StepState`;
+* the registry :data:`SOLVERS` (name → :class:`SolverSpec`), read by ``simulate``, the
+  scene-file loader and the cost study; :func:`register_solver` adds an integrator.
+"""
+
+from ._controllers import AdaptiveStep, ConstantStep
+from ._observers import Observer, StepState
+from ._registry import METHODS, SOLVERS, SolverSpec, register_solver, unregister_solver
+from ._save import SaveAt
+from ._simulate import Trajectory, simulate
+from ._solvers import EulerMaruyama, ExplicitRK, Solver, VectorField
 from ._tables import BS32, DOPRI5, EULER, HEUN, RK4, TABLES, RKTable
 
-__all__ = ["simulate", "SaveAt", "Trajectory", "METHODS", "RKTable", "EULER", "HEUN", "RK4",
-           "DOPRI5", "BS32", "TABLES"]
+__all__ = ["simulate", "SaveAt", "Trajectory", "METHODS", "SOLVERS", "SolverSpec",
+           "register_solver", "unregister_solver", "Solver", "ExplicitRK", "EulerMaruyama",
+           "VectorField", "ConstantStep", "AdaptiveStep", "Observer", "StepState", "RKTable",
+           "EULER", "HEUN", "RK4", "DOPRI5", "BS32", "TABLES"]

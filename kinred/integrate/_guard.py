@@ -63,9 +63,11 @@ import numpy as np
 from .. import observables as _obs
 from ..dynamics import Drift, Noise, SelfPropulsion
 from ..dynamics.kernels import CuckerSmale, Morse, Quadratic
+from ..errors import SimulationDiverged
 from ._tables import RKTable
 
-__all__ = ["GROWTH", "GROWTH_NOISE", "Guard", "energy_budget", "real_stability", "step_hint"]
+__all__ = ["GROWTH", "GROWTH_NOISE", "Guard", "DivergenceCheck", "diverged", "energy_budget",
+           "real_stability", "step_hint"]
 
 #: Factor by which a computed ``Q`` must exceed the a-priori bound of the exact flow before
 #: the run is declared diverged: a stable explicit step stays within truncation error of the
@@ -373,3 +375,60 @@ def step_hint(scene, table: RKTable, dt: float, states):
         return generic, None
     head = f"dt = {dt:g} is too large: " if dt is not None else ""
     return head + "; ".join(out) + ".", min(cands)
+
+
+def diverged(t, step, n_steps, method, dt, why, hint, stable_dt=None) -> SimulationDiverged:
+    """The :class:`~kinred.errors.SimulationDiverged` of a run stopped at ``(t, step)``.
+
+    ``n_steps`` is the total of a fixed-step run (None for adaptive ones), ``dt`` the user's
+    step (the initial one of adaptive methods).
+    """
+    total = f" of {n_steps}" if n_steps is not None else ""
+    return SimulationDiverged(
+        f"simulation diverged at t={t:.6g} (step {step}{total}, method={method!r}, "
+        f"dt={dt:g}): {why}. Hint: {hint}", t=float(t), step=int(step), stable_dt=stable_dt)
+
+
+class DivergenceCheck:
+    """The ``O(N·d)`` check of every accepted step: a finite state within the :class:`Guard`.
+
+    Parameters
+    ----------
+    scene : Scene
+    table : RKTable or None
+        The method's table (stability interval of the hint; None: generic hint).
+    method : str
+    dt : float
+        The user's step.
+    n_steps : int or None
+        Steps of a fixed-step run; None for adaptive runs (whose step is not the user's: the
+        hint then gives no fixed ``dt``).
+    t0 : float
+    x0, v0 : ndarray
+        The initial state as given (the hint's first state).
+    w : (N,) ndarray
+        Agent weights.
+    """
+
+    def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w):
+        self.scene, self.table, self.method, self.dt = scene, table, method, dt
+        self.n_steps, self.t0, self.x0, self.v0 = n_steps, t0, x0, v0
+        self.guard = Guard(scene, v0, w, t0) if scene.order == 2 else None
+
+    def __call__(self, t, step, x, v):
+        """Raise :class:`~kinred.errors.SimulationDiverged` if the state at ``t`` diverged."""
+        s = float(np.sum(x)) + (float(np.sum(v)) if v is not None else 0.0)
+        if not math.isfinite(s):
+            self._stop(t, step, x, v, "the state became non-finite (NaN/Inf/overflow)")
+        why = self.guard.check(t, v) if self.guard is not None else None
+        if why is not None:
+            self._stop(t, step, x, v, why)
+
+    def _stop(self, t, step, x, v, why):
+        fixed_dt = self.dt if self.n_steps is not None else None
+        if self.table is None:
+            hint, stable = step_hint(self.scene, None, fixed_dt, [])
+        else:
+            hint, stable = step_hint(self.scene, self.table, fixed_dt,
+                                     [(self.t0, self.x0, self.v0), (t, x, v)])
+        raise diverged(t, step, self.n_steps, self.method, self.dt, why, hint, stable)

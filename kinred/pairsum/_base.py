@@ -187,6 +187,10 @@ class PairSum(Protocol):
         of the plan's terms for each target, fresh arrays the caller keeps. ``v`` is None in
         first-order scenes; ``rng`` (a ``numpy.random.Generator`` or None) is for stochastic
         backends; exact ones ignore it.
+
+    A backend that draws random numbers declares the attribute ``stochastic = True``:
+    :func:`~kinred.integrate.simulate` then passes the run's generator (from its ``seed``) to
+    every evaluation; without it a scene without noise is deterministic and gets ``rng=None``.
     """
 
     def plan(self, scene, n: int, dim: int) -> Any: ...

@@ -159,6 +159,9 @@ class RandomBatch:
     #: Pair sums run in float64.
     precision = "double"
 
+    #: It draws from the run's generator: ``simulate`` passes it to every evaluation.
+    stochastic = True
+
     def __init__(self, p: int = 2, block: int | None = None):
         self.p = as_int(p, "p", low=2)
         self.block = BLOCK if block is None else as_int(block, "block", low=1)

@@ -18,16 +18,16 @@ from ._base import Study, StudyConfig, clock, draw_front, time_to_reach
 
 
 def methods() -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """``(fixed, adaptive)``: the deterministic methods of :mod:`kinred.integrate`, in its order.
+    """``(fixed, adaptive)``: the deterministic integrators of the registry
+    :data:`kinred.integrate.SOLVERS`, in its order.
 
-    A method is adaptive iff its Butcher table carries an error estimate (``E``);
-    ``"euler_maruyama"`` (noise only, no table of its own) is not part of the study.
+    Stochastic ones (``"euler_maruyama"``, for noise) are not part of the study; one registered
+    with :func:`kinred.integrate.register_solver` is priced like the built-in ones.
     """
-    from ...integrate import METHODS, TABLES
+    from ...integrate import SOLVERS
 
-    ms = [m for m in METHODS if m in TABLES]
-    return (tuple(m for m in ms if TABLES[m].E is None),
-            tuple(m for m in ms if TABLES[m].E is not None))
+    ms = [s for s in SOLVERS.values() if not s.stochastic]
+    return (tuple(s.name for s in ms if not s.adaptive), tuple(s.name for s in ms if s.adaptive))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,190 @@
+r"""What a run records and when: :class:`SaveAt`, the save grid and the recorder.
+
+Record what is asked, not everything (Diffrax ``SaveAt``): observables at the save times,
+full states only on request. The save grid always holds ``t0`` and ``t1``; on a fixed-step run
+it lies on the step grid (its points are step indices), an adaptive run steps to hit each of
+its times exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from dataclasses import dataclass
+from typing import Any, Mapping, NamedTuple
+
+import numpy as np
+
+from .. import observables as _obs
+from .._validate import as_array, as_int
+from ..errors import InvalidInput
+
+__all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder"]
+
+_BUILTIN = {
+    "gamma": (2, lambda t, x, v, w: _obs.gamma(v, w)),
+    "lambda": (1, lambda t, x, v, w: _obs.lambda_(x, w)),
+    "centre": (1, lambda t, x, v, w: _obs.centre(x, w)),
+    "mean_velocity": (2, lambda t, x, v, w: _obs.mean_velocity(v, w)),
+}
+
+
+@dataclass(frozen=True)
+class SaveAt:
+    """What to record and when.
+
+    Parameters
+    ----------
+    every : int, optional
+        Save every ``every`` steps of size ``dt`` (times ``t0 + j·every·dt``); for adaptive
+        methods the same time grid is hit exactly. Default: every step.
+    t : (T,) array_like, optional
+        Explicit save times in ``[t0, t1]`` (on the step grid for fixed-step methods).
+        Exclusive with ``every``.
+    observables : sequence or mapping, optional
+        Names among ``"gamma"``, ``"lambda"``, ``"centre"``, ``"mean_velocity"`` and/or
+        callables ``fn(t, x, v, weights) -> array`` (keyed by ``fn.__name__``; a mapping gives
+        the keys). Default: ``("gamma", "lambda")`` (``("lambda",)`` for first-order scenes).
+    states : bool or {"x", "v"}
+        Record full states (``True``: both) – off by default.
+
+    Examples
+    --------
+    >>> SaveAt(every=50, observables=("gamma",)).every
+    50
+    """
+
+    every: int | None = None
+    t: Any = None
+    observables: Any = None
+    states: Any = False
+
+    def __post_init__(self):
+        if self.every is not None and self.t is not None:
+            raise InvalidInput("SaveAt takes either every or t, not both")
+        if self.every is not None:
+            object.__setattr__(self, "every", as_int(self.every, "every", low=1))
+        if self.t is not None:
+            t = np.sort(as_array(self.t, "t", ndim=1))
+            object.__setattr__(self, "t", t)
+        if self.states not in (True, False, "x", "v"):
+            raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {self.states!r}")
+
+
+def observable_list(spec, order: int) -> list:
+    """``[(name, fn(t, x, v, weights))]`` of a :class:`SaveAt`'s ``observables``."""
+    if spec is None:
+        spec = ("gamma", "lambda") if order == 2 else ("lambda",)
+    items = list(spec.items()) if isinstance(spec, Mapping) else [
+        (s if isinstance(s, str) else getattr(s, "__name__", f"obs{i}"), s)
+        for i, s in enumerate(spec)]
+    out = []
+    for name, s in items:
+        if isinstance(s, str):
+            if s not in _BUILTIN:
+                raise InvalidInput(f"observable {s!r} is unknown; valid names: "
+                                   f"{', '.join(map(repr, _BUILTIN))} or a callable "
+                                   f"fn(t, x, v, weights)")
+            need, fn = _BUILTIN[s]
+            if need == 2 and order == 1:
+                raise InvalidInput(f"observable {s!r} needs velocities; the scene is first-order")
+            out.append((name, fn))
+        elif callable(s):
+            out.append((name, s))
+        else:
+            raise InvalidInput(f"observables must be names or callables, got {s!r}")
+    return out
+
+
+class SaveGrid(NamedTuple):
+    """Save points: ``times (T,)`` from ``t0`` to ``t1``; ``steps (T,)`` their step indices on a
+    fixed grid (None for adaptive runs)."""
+
+    times: np.ndarray
+    steps: np.ndarray | None
+
+
+def save_grid(save: SaveAt, t0: float, t1: float, dt: float, n_steps: int | None,
+              method: str) -> SaveGrid:
+    """The save points of a run of ``n_steps`` fixed steps (None: adaptive) of ``save``.
+
+    Examples
+    --------
+    >>> save_grid(SaveAt(every=3), 0.0, 1.0, 0.1, 10, "euler").steps
+    array([ 0,  3,  6,  9, 10])
+    >>> save_grid(SaveAt(every=3), 0.0, 1.0, 0.1, None, "rk45").times
+    array([0. , 0.3, 0.6, 0.9, 1. ])
+    """
+    if n_steps is not None:
+        return _fixed_grid(save, t0, t1, dt, n_steps, method)
+    if save.t is not None:
+        if save.t[0] < t0 or save.t[-1] > t1:
+            raise InvalidInput(f"SaveAt t must lie in t_span [{t0}, {t1}], got "
+                               f"[{save.t[0]}, {save.t[-1]}]")
+        times = np.unique(np.concatenate([[t0], save.t, [t1]]))
+    else:
+        every = save.every or 1
+        m = int(math.floor((t1 - t0) / (every * dt) + 1e-9))
+        times = np.unique(np.concatenate([t0 + np.arange(m + 1) * every * dt, [t1]]))
+        times = times[times <= t1]
+    return SaveGrid(times, None)
+
+
+def _fixed_grid(save, t0, t1, dt, n_steps, method):
+    if save.t is not None:
+        idx = np.rint((save.t - t0) / dt).astype(np.int64)
+        off = np.abs(t0 + idx * dt - save.t)
+        if np.any(off > 1e-9 * max(1.0, abs(t1))) or np.any(idx < 0) or np.any(idx > n_steps):
+            bad = save.t[int(np.argmax(off))] if np.any(off > 1e-9 * max(1.0, abs(t1))) else \
+                save.t[(idx < 0) | (idx > n_steps)][0]
+            raise InvalidInput(f"SaveAt t must lie on the step grid t0 + n*dt within t_span "
+                               f"for method={method!r}; got t={bad!r}")
+        steps = np.unique(np.concatenate([[0], idx, [n_steps]]))
+    else:
+        every = save.every or 1
+        steps = np.unique(np.concatenate([np.arange(0, n_steps + 1, every), [n_steps]]))
+    times = t0 + steps * dt
+    times[-1] = t1
+    return SaveGrid(times, steps)
+
+
+class Recorder:
+    """Records the observables and requested states at the save points.
+
+    Parameters
+    ----------
+    save : SaveAt
+    obs : list of (name, fn)
+        From :func:`observable_list`.
+    scene : Scene
+    w : (N,) ndarray
+        Agent weights (passed to the observables).
+    shift : (d,) ndarray or None
+        Working positions are relative to it (added back before recording).
+    shape : (int, int)
+        ``(N, d)``.
+    n_save : int
+        Number of save points.
+    """
+
+    def __init__(self, save, obs, scene, w, shift, shape, n_save):
+        self.obs, self.w, self.shift = obs, w, shift
+        self.rec = {name: [] for name, _ in obs}
+        want_x = save.states in (True, "x")
+        want_v = save.states in (True, "v") and scene.order == 2
+        self.X = np.empty((n_save, *shape)) if want_x else None
+        self.V = np.empty((n_save, *shape)) if want_v else None
+
+    def __call__(self, j, t, x, v):
+        """Record save point ``j`` at time ``t`` from the working state ``(x, v)``."""
+        xt = x + self.shift if self.shift is not None else x
+        for name, fn in self.obs:
+            self.rec[name].append(np.asarray(fn(t, xt, v, self.w), dtype=float))
+        if self.X is not None:
+            self.X[j] = xt
+        if self.V is not None:
+            self.V[j] = v
+
+    def observables(self) -> Mapping[str, np.ndarray]:
+        """The recorded observables, ``(T, ...)`` arrays in a read-only mapping."""
+        return types.MappingProxyType({k: np.array(vals) for k, vals in self.rec.items()})
