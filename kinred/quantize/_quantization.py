@@ -294,7 +294,7 @@ class AtomicQuantization(Quantization):
 
 @dataclass(frozen=True, eq=False, repr=False)
 class TensorQuantization(Quantization):
-    """Grid of per-coordinate quantizations: Lemma 4.1 of the paper (label ``lem:W:tensors``).
+    """Grid of per-coordinate quantizations: Lemma 4.1 of the paper.
 
     .. math:: W_1(\\mu^1\\otimes\\cdots\\otimes\\mu^d, \\mu^N) \\le \\sum_j \\varepsilon_j,
               \\qquad N = \\prod_j N_j .
@@ -367,7 +367,7 @@ class TensorQuantization(Quantization):
 class MixtureQuantization(Quantization):
     """Union of per-component quantizations, weights ``wₗ·(component weights)``.
 
-    Lemma 4.2 of the paper (label ``lem:W:sums``), generalized to unequal weights and unequal
+    Lemma 4.2 of the paper, generalized to unequal weights and unequal
     atom counts by the same homogeneity/subadditivity argument:
 
     .. math:: W_1\\Bigl(\\sum_l w_l\\mu_l, \\sum_l w_l\\mu_l^{N_l}\\Bigr) \\le \\sum_l w_l\\,\\varepsilon_l .
@@ -419,9 +419,9 @@ class MixtureQuantization(Quantization):
 
 @dataclass(frozen=True, eq=False, repr=False)
 class PushQuantization(Quantization):
-    """Quantization of ``M#μ``: atoms of ``μ`` pushed by ``M`` (eq. (4.9), label ``projatom``).
+    """Quantization of ``M#μ``: atoms of ``μ`` pushed by ``M`` (eq. (4.9)).
 
-    Bound and error are those of the base times ``‖M‖`` (eq. (4.8), label ``pf``:
+    Bound and error are those of the base times ``‖M‖`` (eq. (4.8):
     ``W1(M#μ, M#ν) ≤ ‖M‖ W1(μ, ν)``); ``error_kind="upper"``.
     """
 
@@ -467,8 +467,8 @@ def _levels(n: int, rule: str) -> np.ndarray:
 def quantize_1d(mu, n: int, *, rule: str = "midpoint") -> Quantization1D:
     """``n`` equal-weight atoms at quantile levels of a 1-D measure.
 
-    ``rule="paper"``: levels ``i/N``, ``i = 0..N−1`` (so ``x₀ = a``), eq. (4.20) of the paper
-    (label ``quantiles``), with bound ``σ/N`` (eq. (4.21), label ``quantiles2``).
+    ``rule="paper"``: levels ``i/N``, ``i = 0..N−1`` (so ``x₀ = a``), eq. (4.20) of the paper,
+    with bound ``σ/N`` (eq. (4.21)).
     ``rule="midpoint"`` (default, W1-optimal): levels ``(2i−1)/(2N)``, ``i = 1..N``, the medians
     of the N quantile cells, with bound ``σ/(2N)``:
 
@@ -535,7 +535,7 @@ def quantize(mu: Measure, *, eps: float | None = None, atoms: int | None = None,
 
     * 1-D laws: :func:`quantize_1d` with the fewest atoms meeting ``eps`` (or ``atoms``).
     * :class:`~kinred.measures.TensorProduct`: a grid whose per-coordinate counts come from
-      :func:`~kinred.quantize.budget` (delayed curse, eq. (4.22), label ``delayed``).
+      :func:`~kinred.quantize.budget` (delayed curse, eq. (4.22)).
     * :class:`~kinred.measures.Mixture`: a union of component quantizations (Lemma 4.2); with
       ``eps`` every component gets accuracy ``eps`` (so ``Σ wₗ εₗ ≤ eps``), with ``atoms`` the
       smallest common component accuracy whose total count fits is found by bisection (the
