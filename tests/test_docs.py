@@ -4,6 +4,7 @@ needs no network, and no LaTeX label of the paper in its prose."""
 
 from __future__ import annotations
 
+import base64
 import html as html_lib
 import re
 import subprocess
@@ -169,6 +170,26 @@ def test_gallery_shows_every_example_with_output_and_figure(html):
         figure = html / "_images" / f"sphx_glr_{name}_001.png"
         assert figure.is_file() and figure.stat().st_size > 5_000, f"{name}: no figure"
         assert f"_images/sphx_glr_{name}_001.png" in page
+
+
+def test_tour_shows_the_demo_figures_and_table1(html):
+    raw = (html / "getting-started.html").read_text(encoding="utf-8")
+    text = _page_text(html / "getting-started.html")
+    # the report's figures, drawn at build time (PNG data), each with the report's caption
+    figures = re.findall(r'<figure\b[^>]*>\s*<img [^>]*src="data:image/png;base64,([^"]+)"[^>]*>'
+                         r'\s*<figcaption>\s*<p><span class="caption-text">([^<]+)<', raw)
+    assert len(figures) >= 3, "the demo's report figures are missing from the tour"
+    for data, caption in figures:
+        assert base64.b64decode(data).startswith(b"\x89PNG") and len(data) > 5_000
+        assert len(caption.strip()) > 10, caption
+    assert "$ kinred demo --atoms 100 --k 2 10" in text and "k=10" in text
+    assert "Reading the demo output" in text and "TODO" not in text
+    # Table 1 beside the paper's, and Figure 2
+    assert "Table 1, reproduced" in text
+    for cell in ("1/5/14", "14/0/6", "0/13/7", "13/0/7"):
+        assert cell in text, cell
+    assert (html / "_images" / "table1_beta1.62.png").is_file()
+    assert "_images/table1_beta1.62.png" in raw
 
 
 def test_markdown_converter_handles_the_subset():
