@@ -2,9 +2,18 @@
 
 Build (fails on any warning, as the test suite does)::
 
-    python -m sphinx -W --keep-going -E -b html docs /tmp/kinred-html
+    make docs      # creates .venv, installs the docs extra, builds docs/_build/html
+    python -m sphinx -W --keep-going -E -b html docs docs/_build/html   # the same, by hand
 
-Two small local extensions live in this file, so that generated content cannot drift from
+The build needs no network: MathJax comes from the ``sphinx-mathjax-offline`` wheel and is
+copied into ``_static/mathjax``, and no page loads anything from another site.
+
+The scripts of ``examples/`` become a gallery (sphinx-gallery): each runs at build time, and
+its printed output and matplotlib figures are rendered under its code. Scripts whose full run
+is long read ``KINRED_EXAMPLES_SMOKE=1`` (set below) and run their ``--smoke`` sizes, as each
+says in its docstring. Generated gallery pages go to ``docs/auto_examples/`` (git-ignored).
+
+Three small local extensions live in this file, so that generated content cannot drift from
 its source:
 
 * ``.. kinred-cli::`` renders ``format_help()`` of :func:`kinred.cli.build_parser` and of every
@@ -14,15 +23,25 @@ its source:
   not a dependency: the directive converts the small Markdown subset those pages use
   (ATX headings, paragraphs, ``-``/``*`` lists, pipe tables, fenced and indented code,
   inline code, links, emphasis) to reStructuredText. Anything it does not understand is kept as
-  text, and reStructuredText warnings still fail the build.
+  text, and reStructuredText warnings still fail the build. ``:section: TITLE`` includes
+  only the section under the heading ``TITLE`` (used for README.md's Table 1).
+* ``.. kinred-demo::`` runs ``kinred demo`` (with the flags of ``:args:``) at build time and
+  renders what it prints and the figures of its ``report.html`` with their captions, so the
+  pictures are always those of the current code.
 """
 
 from __future__ import annotations
 
 import argparse
+import base64
+import contextlib
+import html
+import io
 import os
 import re
+import shlex
 import sys
+import tempfile
 
 from docutils import nodes
 from docutils.parsers.rst import Directive, directives
@@ -32,6 +51,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
+
+# Before anything imports matplotlib: no display, and the gallery's long examples at their
+# smoke sizes (each such script says so in its docstring).
+os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ["KINRED_EXAMPLES_SMOKE"] = "1"
 
 import kinred  # noqa: E402
 
@@ -45,7 +69,9 @@ version = release = kinred.__version__
 extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.mathjax",
+    "sphinx-mathjax-offline",   # MathJax 3 from the wheel: sets mathjax_path to a local copy
     "numpydoc",
+    "sphinx_gallery.gen_gallery",
 ]
 
 source_suffix = {".rst": "restructuredtext"}
@@ -77,6 +103,23 @@ nitpick_ignore_regex = [
 ]
 # kinred's own references must all resolve: nothing of kinred is ignored.
 nitpick_ignore: list[tuple[str, str]] = []
+
+# -- gallery (sphinx-gallery) -----------------------------------------------------------------
+
+sphinx_gallery_conf = {
+    "examples_dirs": "../examples",
+    "gallery_dirs": "auto_examples",
+    "filename_pattern": r"\.py$",          # run every script (not only plot_*.py)
+    "ignore_pattern": r"/_[^/]*\.py$",      # private helpers (_name.py), if any
+    "abort_on_example_error": True,         # a failing example fails the build
+    "download_all_examples": False,
+    "remove_config_comments": True,
+    "capture_repr": (),                     # show printed output only
+    "image_scrapers": ("matplotlib",),
+    "write_computation_times": False,       # no sg_execution_times page in the tree
+    "show_signature": False,
+    "run_stale_examples": True,             # always re-run: outputs never lag the code
+}
 
 # -- HTML --------------------------------------------------------------------------------------
 
@@ -131,6 +174,8 @@ _FENCE = re.compile(r"^(\s*)(```+|~~~+)\s*([\w+-]*)\s*$")
 _BULLET = re.compile(r"^(\s*)([-*+])\s+(.*)$")
 _TABLE_SEP = re.compile(r"^\s*\|?\s*:?-{2,}:?\s*(\|\s*:?-{2,}:?\s*)*\|?\s*$")
 _ADORN = "=-~^\"'"
+# an HTML comment on lines of its own (removed with its lines), or inside a line
+_HTML_COMMENT = re.compile(r"^[ \t]*<!--.*?-->[ \t]*(?:\n|\Z)|<!--.*?-->", re.S | re.M)
 
 
 _BEFORE_OK = set(" \t'\"([{<-/:")
@@ -198,8 +243,10 @@ def _table(rows: list[str]) -> list[str]:
 def markdown_to_rst(text: str, *, top_level: int = 0) -> list[str]:
     """Convert the Markdown subset used by the docs/*.md pages to reST lines.
 
-    ``top_level`` shifts heading levels (0: ``#`` is the page title).
+    ``top_level`` shifts heading levels (0: ``#`` is the page title). HTML comments
+    (``<!-- ... -->``, notes for the authors) are dropped.
     """
+    text = _HTML_COMMENT.sub("", text)
     lines = text.splitlines()
     out: list[str] = []
     i = 0
@@ -274,11 +321,32 @@ def markdown_to_rst(text: str, *, top_level: int = 0) -> list[str]:
     return out
 
 
+def markdown_section(text: str, title: str) -> str | None:
+    """The section of ``text`` under the ATX heading ``title`` (heading included), up to the
+    next heading of the same or a higher level; None if there is no such heading."""
+    lines = text.splitlines()
+    start = level = None
+    in_fence = False
+    for i, line in enumerate(lines):
+        if _FENCE.match(line):
+            in_fence = not in_fence
+            continue
+        m = None if in_fence else _HEADING.match(line)
+        if m is None:
+            continue
+        if start is None and m.group(2) == title:
+            start, level = i, len(m.group(1))
+        elif start is not None and len(m.group(1)) <= level:
+            return "\n".join(lines[start:i]) + "\n"
+    return None if start is None else "\n".join(lines[start:]) + "\n"
+
+
 class IncludeMarkdown(Directive):
-    """``.. include-markdown:: path.md`` (relative to this page), option ``:shift: N``."""
+    """``.. include-markdown:: path.md`` (relative to this page), options ``:shift: N`` and
+    ``:section: TITLE``."""
 
     required_arguments = 1
-    option_spec = {"shift": directives.nonnegative_int}
+    option_spec = {"shift": directives.nonnegative_int, "section": directives.unchanged_required}
 
     def run(self):
         env = self.state.document.settings.env
@@ -287,12 +355,77 @@ class IncludeMarkdown(Directive):
         if not os.path.exists(path):
             raise self.severe(f"include-markdown: {self.arguments[0]} does not exist ({path})")
         with open(path, encoding="utf-8") as fh:
-            rst = markdown_to_rst(fh.read(), top_level=self.options.get("shift", 0))
+            text = fh.read()
+        if "section" in self.options:
+            text = markdown_section(text, self.options["section"])
+            if text is None:
+                raise self.severe(f"include-markdown: {self.arguments[0]} has no heading "
+                                  f"{self.options['section']!r}")
+        rst = markdown_to_rst(text, top_level=self.options.get("shift", 0))
         self.state_machine.insert_input(StringList(rst, source=path), path)
         return []
+
+
+# -- ``.. kinred-demo::`` ----------------------------------------------------------------------
+
+_REPORT_FIGURE = re.compile(r'<figure><img alt="[^"]*" src="(data:image/png;base64,[^"]+)">'
+                            r"<figcaption>(.*?)</figcaption></figure>", re.S)
+
+
+def run_demo(args: list[str]) -> tuple[str, list[tuple[str, str]]]:
+    """Run ``kinred demo ARGS`` into a temporary folder.
+
+    Returns what it printed (the folder shown as ``results/demo``) and the figures of its
+    ``report.html`` as ``(data URI, caption)``. Raises RuntimeError if the demo fails, warns,
+    or its report is missing a figure.
+    """
+    from kinred.cli import main
+
+    with tempfile.TemporaryDirectory(prefix="kinred-docs-demo-") as tmp:
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            status = main(["demo", *args, "--out", tmp])
+        if status != 0 or "warning" in err.getvalue().lower():
+            raise RuntimeError(f"kinred demo {' '.join(args)} exited with {status}:\n"
+                               f"{out.getvalue()}\n{err.getvalue()}")
+        with open(os.path.join(tmp, "report.html"), encoding="utf-8") as fh:
+            report = fh.read()
+        printed = out.getvalue().replace(tmp, "results/demo").rstrip()
+    if 'class="figure-note"' in report:
+        raise RuntimeError("kinred demo: the report is missing a figure (see its figure note)")
+    figures = [(uri, html.unescape(cap)) for uri, cap in _REPORT_FIGURE.findall(report)]
+    if not figures:
+        raise RuntimeError("kinred demo: report.html has no figure")
+    base64.b64decode(figures[0][0].split(",", 1)[1], validate=True)
+    return printed, figures
+
+
+class KinredDemo(Directive):
+    """``.. kinred-demo::`` with option ``:args:`` (flags of ``kinred demo``): its printed
+    summary as a console block, then every figure of its report with the report's caption."""
+
+    has_content = False
+    option_spec = {"args": directives.unchanged}
+
+    def run(self):
+        args = shlex.split(self.options.get("args", ""))
+        try:
+            printed, figures = run_demo(args)
+        except RuntimeError as exc:
+            raise self.error(str(exc)) from None
+        command = " ".join(["kinred", "demo", *args])
+        out: list[nodes.Node] = [nodes.literal_block(text=f"$ {command}\n{printed}",
+                                                     language="text")]
+        for uri, caption in figures:
+            fig = nodes.figure()
+            fig += nodes.image(uri=uri, alt=caption)
+            fig += nodes.caption(text=caption)
+            out.append(fig)
+        return out
 
 
 def setup(app):
     app.add_directive("kinred-cli", KinredCLI)
     app.add_directive("include-markdown", IncludeMarkdown)
+    app.add_directive("kinred-demo", KinredDemo)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -1,7 +1,9 @@
-"""Every script of examples/ runs in its smoke mode and prints its expected lines."""
+"""Every script of examples/ runs in its smoke mode and prints its expected lines, and is a
+sphinx-gallery script (the documentation renders them as a gallery, tests/test_docs.py)."""
 
 from __future__ import annotations
 
+import ast
 import os
 import re
 import subprocess
@@ -44,14 +46,47 @@ def test_every_example_is_covered():
     assert set(_scripts()) == set(EXPECTED), "update EXPECTED when adding an example"
 
 
+def _run(script, args, cwd, *, smoke_variable=False):
+    env = dict(os.environ, PYTHONHASHSEED="0", MPLBACKEND="Agg")
+    env.pop("KINRED_EXAMPLES_SMOKE", None)
+    if smoke_variable:
+        env["KINRED_EXAMPLES_SMOKE"] = "1"
+    # timeouts: the slowest smoke run (Dask cluster start) takes 25 s on a loaded machine
+    return subprocess.run([sys.executable, str(EXAMPLES / script), *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.parametrize("script", sorted(EXPECTED))
+def test_example_is_a_gallery_script(script):
+    """A docstring that opens with an underlined title, ``# %%`` sections, and a figure."""
+    source = (EXAMPLES / script).read_text(encoding="utf-8")
+    doc = ast.get_docstring(ast.parse(source), clean=False) or ""
+    lines = doc.strip("\n").splitlines()
+    assert len(lines) > 2 and lines[1] == "=" * len(lines[0]) and lines[0].strip(), \
+        f"{script}: the docstring must open with a title underlined by '=' (the gallery's title)"
+    assert source.count("\n# %%\n") >= 2, f"{script}: split it into '# %%' sections"
+    assert "plt.subplots(" in source and "set_xlabel(" in source and "set_ylabel(" in source, \
+        f"{script}: draw at least one figure with labelled axes"
+
+
 @pytest.mark.parametrize("script", sorted(EXPECTED))
 def test_example_smoke(script, tmp_path):
     path = EXAMPLES / script
     assert path.exists(), f"{path} is missing"
-    env = dict(os.environ, PYTHONHASHSEED="0", MPLBACKEND="Agg")
-    proc = subprocess.run([sys.executable, str(path), "--smoke"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=600)
+    proc = _run(script, ["--smoke"], tmp_path)
     assert proc.returncode == 0, f"{script} failed:\n{proc.stdout}\n{proc.stderr}"
     for pattern in EXPECTED[script]:
         assert re.search(pattern, proc.stdout, re.MULTILINE), \
             f"{script}: no line matching {pattern!r} in\n{proc.stdout}"
+
+
+def test_gallery_variable_selects_the_smoke_sizes(tmp_path):
+    """docs/conf.py sets KINRED_EXAMPLES_SMOKE=1 so that the gallery runs the long examples
+    at their smoke sizes: without arguments, recovery_l1.py then prints the smoke table."""
+    conf = (ROOT / "docs" / "conf.py").read_text(encoding="utf-8")
+    assert 'os.environ["KINRED_EXAMPLES_SMOKE"] = "1"' in conf
+    proc = _run("recovery_l1.py", [], tmp_path, smoke_variable=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "20 vectors in R^200 with 8 non-zeros" in proc.stdout
+    for pattern in EXPECTED["recovery_l1.py"]:
+        assert re.search(pattern, proc.stdout, re.MULTILINE), proc.stdout

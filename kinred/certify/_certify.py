@@ -179,8 +179,7 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
 
     The high-dimensional forward-Euler run is bit-identical to
     ``simulate(scene, x0, v0, t_span, dt)`` and the projected one to
-    ``simulate(scene.project(M), *project_state(M, x0, v0), t_span, dt)`` (eq. (2.4)–(2.5),
-    labels ``eq:eul2``–``eq:eul3``; eq. (2.14)–(2.15), labels ``eq:l2:1``–``eq:l2:2``). At
+    ``simulate(scene.project(M), *project_state(M, x0, v0), t_span, dt)`` (eq. (2.4)–(2.5); eq. (2.14)–(2.15)). At
     every step the proofs of Theorems 2.2 and 2.3 (eq. (2.11), (2.18)) are applied with what
     is measured at that step instead of worst cases: the defect of the projected
     high-dimensional trajectory in the projected scheme as a vector (the JL distortion of
@@ -251,7 +250,7 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     if method != "euler":
         raise InvalidInput(
             f"method={method!r} is not supported by certificates: the derivation "
-            "(docs/certificates.md) is written for forward Euler, eq. (1.6) (label eq:eul1), the "
+            "(docs/certificates.md) is written for forward Euler, eq. (1.6), the "
             "paper's scheme; supported: 'euler'")
     engine = as_choice(engine, "engine", ("fast", "numpy"))
     P = as_projection(M)

@@ -1,6 +1,6 @@
 r"""The paper's a-priori bounds for the projected Euler scheme, with their constants.
 
-* Theorem 2.2 (eq. (2.11), label ``eq:unifstab``), the ℓ∞-over-agents bound for the class
+* Theorem 2.2 (eq. (2.11)), the ℓ∞-over-agents bound for the class
   (1.1), applied to the ``2N`` variables ``x₁..x_N, v₁..v_N`` (the arrangement of §3.3):
 
   .. math:: \mathcal E^n \le \varepsilon\, h n\, B\, e^{h n A}, \quad
@@ -9,7 +9,7 @@ r"""The paper's a-priori bounds for the projected Euler scheme, with their const
   so an agent's error in ``ℝ²ᵏ`` is at most ``√2`` times it (``paper_bound_max``).
   ``L, L′, L″`` are the constants (1.2)–(1.4) of the effects
   (:func:`kinred.kinetic._bounds.effect_constants`, with ``S = Σⱼ cⱼ = κ``);
-* Theorem 2.3 (eq. (2.18), label ``eq:leastsqstab``), the least-squares bound for
+* Theorem 2.3 (eq. (2.18)), the least-squares bound for
   Cucker–Smale only (``paper_bound``; NaN for any other scene):
 
   .. math:: \sqrt{\mathcal E_x^2 + \mathcal E_v^2} \le \varepsilon(1+\varepsilon)\, h n\,

@@ -18,7 +18,7 @@ and mixtures are ``[[component]]`` tables with ``weight = ...`` each holding
 ``[[component.coordinate]]`` tables.
 
 The command prints the budget table -- k̄ (coordinates with more than one atom), the ``N_j``
-(run-length compressed), ``N``, the bound of eq. (4.22) (label ``delayed``) -- beside the
+(run-length compressed), ``N``, the bound of eq. (4.22) -- beside the
 paper's simple recipe for the same ε, and the a-posteriori error: for a tensor product the
 exact W1 under the ℓ1 ground cost (sum of exact marginal 1-D errors), an upper bound of the
 Euclidean W1. ``--out`` writes ``points (N, d)`` and ``weights (N,)`` to an ``.npz`` file

@@ -1,4 +1,4 @@
-"""Wasserstein-1 distances (eq. (4.5) of the paper, label ``wasserstein``).
+"""Wasserstein-1 distances (eq. (4.5) of the paper).
 
 :func:`w1` returns a :class:`W1Result` saying what it computed: exact values (POT's network
 simplex with a dense or lazily evaluated Euclidean cost, exact 1-D formulas, the exact ℓ1 W1

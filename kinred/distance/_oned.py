@@ -5,7 +5,7 @@ In 1-D the monotone (quantile) coupling is optimal, so
 .. math:: W_1(\\mu,\\nu) = \\int_0^1 |F^{-1}(u) - G^{-1}(u)|\\,du
           = \\int_{\\mathbb R} |F(x) - G(x)|\\,dx ,
 
-the form of eq. (4.18)-(4.21) of the paper (labels ``optint``, ``quantiles``, ``quantiles2``).
+the form of eq. (4.18)-(4.21) of the paper.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@ r"""A certified W1 bracket for two atomic measures whose atoms correspond, in ``
 
 Two measures ``μ = Σᵢ wᵢ δ_{aᵢ}`` and ``ν = Σᵢ wᵢ δ_{bᵢ}`` with the same weights and atoms
 paired by index (a particle solution and its reduction or projection, two runs of one
-system) have W1 (eq. (4.5) of the paper, label ``wasserstein``) bracketed by
+system) have W1 (eq. (4.5) of the paper) bracketed by
 
 * **lower**: ``max_θ W1(θ#μ, θ#ν)`` over unit directions θ — each projection ``x ↦ θ·x`` is
   1-Lipschitz, so each 1-D W1 is a Kantorovich–Rubinstein lower bound; the 1-D W1 is exact,

@@ -30,8 +30,8 @@ class W1Result:
     note : str
         What was done, in one or two sentences (which solver, which bounds won).
     metric : str
-        Ground metric of the distance: ``"euclidean"`` (the paper's W1, eq. (4.5), label
-        ``wasserstein``) or ``"l1"`` (the ℓ1 ground cost of ``method="product-l1"``, an upper
+        Ground metric of the distance: ``"euclidean"`` (the paper's W1, eq. (4.5))
+        or ``"l1"`` (the ℓ1 ground cost of ``method="product-l1"``, an upper
         bound for the Euclidean W1).
 
     Examples

@@ -85,8 +85,8 @@ def _quantize_product(p: Prod, budget: int):
     """Grid of per-coordinate midpoint quantizers (levels (2i−1)/(2n)) with ≤ ``budget`` atoms.
 
     Returns the grid atoms and ``Σⱼ W1(μⱼ, Qⱼ)`` (exact 1-D errors), which bounds the
-    Euclidean W1 between the product and its grid from above (Lemma 4.1, label
-    ``lem:W:tensors``, with |·|₂ ≤ |·|₁).
+    Euclidean W1 between the product and its grid from above (Lemma 4.1,
+    with |·|₂ ≤ |·|₁).
     """
     n = [f.n if isinstance(f, Pts) else 1 for f in p.factors]
 
@@ -136,7 +136,7 @@ def w1(
 
     .. math:: W_1(\mu,\nu) = \inf_{\pi\in\Pi(\mu,\nu)} \int |x - y|\,d\pi(x, y)
 
-    eq. (4.5) of the paper (label ``wasserstein``), Euclidean ground metric unless
+    eq. (4.5) of the paper, Euclidean ground metric unless
     ``metric="l1"``.
 
     Every method computes in one common frame ``x = c + s·z`` of both measures (``s`` a power
@@ -164,7 +164,7 @@ def w1(
           continuous laws (exact to ~1e-13).
         * ``"product-l1"`` -- two product measures (``TensorProduct``, a full tensor grid of
           atoms, or atoms declared ``product=True``): the exact W1 for the ℓ1 ground cost,
-          :math:`\sum_j W_1(\mu_j,\nu_j)` (Lemma 4.1, label ``lem:W:tensors``); it bounds the
+          :math:`\sum_j W_1(\mu_j,\nu_j)` (Lemma 4.1); it bounds the
           Euclidean W1 from above. The result has ``metric="l1"``.
         * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (lower bounds from 1-D projections and a subsampled dual, upper bounds from explicit couplings).
         * ``"auto"`` -- an exact value, never a bracket: exact-1d in d = 1; exact (dense below

@@ -8,7 +8,7 @@ Every effect is a small object satisfying the :class:`Effect` protocol. Two kind
 
   .. math:: \bigl(\text{target}\bigr)_i \mathrel{+}= \sum_j c_j\, \varphi(\|s_i - s_j\|)\,(z_j - z_i),
 
-  exactly the paper's class (1.1) (label ``eq:dyn``) with ``f_ij = c_j φ(D)``; they are
+  exactly the paper's class (1.1) with ``f_ij = c_j φ(D)``; they are
   evaluated by the blocked pairwise engine of :class:`~kinred.dynamics.Scene`.
   ``c_j`` is the normalization: ``w_j`` (``normalize="mean"``) or ``N w_j`` (``"sum"``).
 * **per-agent effects**: ``drift(x, v, t) -> (N, d)`` added to the target (O(N·d)), and
@@ -29,7 +29,7 @@ Subclass :class:`Effect` (or just provide its attributes) and implement ``drift`
 or subclass :class:`PairwiseEffect` with any kernel callable ``φ(s)``; no engine change is
 needed (custom kernels without ``value_sq`` are evaluated as ``φ(√q)`` on the blocks).
 
-Projection (eq. (2.4)–(2.5), labels ``eq:eul2``–``eq:eul3``; eq. (3.5), label ``lowdimsys``)
+Projection (eq. (2.4)–(2.5); eq. (3.5))
 ---------------------------------------------------------------------------------------------
 Pairwise effects project as themselves (the kernels see projected distances); ``fᵢ`` terms
 are multiplied by ``M`` (``Noise``: ``σ dW ↦ M σ dW``, ``Drift``: ``c ↦ M c``);
@@ -148,7 +148,7 @@ class PairwiseEffect(Effect):
 
 
 class Alignment(PairwiseEffect):
-    r"""Alignment (Cucker–Smale, eq. (2.13), label ``CS2``).
+    r"""Alignment (Cucker–Smale, eq. (2.13)).
 
     .. math:: \dot v_i \mathrel{+}= \sum_j c_j\, g(\|x_i - x_j\|)\,(v_j - v_i)
 
@@ -174,7 +174,7 @@ class Alignment(PairwiseEffect):
 
 
 class AttractionRepulsion(PairwiseEffect):
-    r"""Attraction–repulsion through a radial potential (eq. (3.14), label ``DOrsogna2``).
+    r"""Attraction–repulsion through a radial potential (eq. (3.14)).
 
     .. math:: \dot v_i \mathrel{+}= -\sum_j c_j \nabla_{x_i} U(\|x_i - x_j\|)
               = \sum_j c_j\, u(\|x_i - x_j\|)\,(x_j - x_i), \qquad u(s) = U'(s)/s.
@@ -223,7 +223,7 @@ class Aggregation(PairwiseEffect):
 
 
 class SelfPropulsion(Effect):
-    r"""Self-propulsion and friction (eq. (3.14), label ``DOrsogna2``): O(N·d), no pairs.
+    r"""Self-propulsion and friction (eq. (3.14)): O(N·d), no pairs.
 
     .. math:: \dot v_i \mathrel{+}= (a - b\,\|v_i\|^2)\, v_i
 

@@ -6,7 +6,7 @@ distances). Built-in kernels also provide
 * ``value_sq(q, out)`` – the fast path: ``φ(√q)`` from squared distances ``q`` into ``out``
   (``out`` may be ``q``), with numpy ufuncs on preallocated blocks;
 * ``sup_norm()`` and ``lipschitz()`` – ``‖φ‖∞`` and ``‖φ′‖∞`` on ``[0, ∞)``, the constants that
-  enter the bounds (1.2)–(1.4) of the paper (labels ``eq:condf1``–``eq:condf3``);
+  enter the bounds (1.2)–(1.4) of the paper;
 * ``slope_bound(lo, hi)`` – elementwise an upper bound of ``sup |φ′|`` over ``[lo, hi]``
   (vectorized; exact for Cucker–Smale and Quadratic), the localized Lipschitz constant of the
   mean-value theorem used by the certificates of :mod:`kinred.certify`.
@@ -19,7 +19,7 @@ distances). Built-in kernels also provide
 
 Custom kernels without ``value_sq`` still work: the backends evaluate ``kernel(np.sqrt(q))``.
 
-Sign conventions (eq. (3.14), label ``DOrsogna2``, and eq. (4.3), label ``eq:dyn5``): a
+Sign conventions (eq. (3.14) and eq. (4.3)): a
 potential ``U`` acts on agent ``i`` by ``−∇_{xᵢ} U(‖xᵢ − xⱼ‖) = u(s)(xⱼ − xᵢ)`` with
 ``u(s) = U′(s)/s``, so the engine only ever needs the scalar ``u``.
 """
@@ -71,7 +71,7 @@ class Kernel(Protocol):
 
 
 class CuckerSmale:
-    r"""Cucker–Smale communication rate (eq. (2.13), label ``CS2``).
+    r"""Cucker–Smale communication rate (eq. (2.13)).
 
     .. math:: g(s) = \frac{G}{(1 + s^2)^{\beta}} = G\,\exp\bigl(-\beta\,\operatorname{log1p}(s^2)\bigr)
 

@@ -1,7 +1,7 @@
 r"""Scenes: sums of effects; their pair sums are evaluated by a pluggable backend.
 
 A :class:`Scene` is the vector field of the sum of its effects on the phase space ``(x, v)``
-of ``N`` agents in ``ℝᵈ`` (second order, eq. (4.2)–(4.3), labels ``eq:dyn4``–``eq:dyn5``), or
+of ``N`` agents in ``ℝᵈ`` (second order, eq. (4.2)–(4.3)), or
 on positions only (first order, :class:`~kinred.dynamics.Aggregation`).
 
 Normalization
@@ -272,7 +272,7 @@ class Scene:
 
     # ------------------------------------------------------------------ projection
     def project(self, M) -> "Scene":
-        """The projected system (eq. (2.4)–(2.5), labels ``eq:eul2``–``eq:eul3``; eq. (3.5)).
+        """The projected system (eq. (2.4)–(2.5); eq. (3.5)).
 
         Pairwise kernels see projected distances, per-agent ``fᵢ`` terms are multiplied by
         ``M``. Effects outside the paper's class (1.1) raise
@@ -321,7 +321,7 @@ class Scene:
         """The projected scene and its initial state in one call: :meth:`project` and
         :meth:`project_state` with the same ``M``.
 
-        The system (2.4)–(2.5) (labels ``eq:eul2``–``eq:eul3``; eq. (3.5)) started from
+        The system (2.4)–(2.5) (eq. (3.5) in continuous time) started from
         ``y⁰ = M x⁰``, ``w⁰ = M v⁰`` row-wise.
 
         Parameters
@@ -376,7 +376,7 @@ class Scene:
 
 
 def project_state(M, x0, v0=None):
-    """``(M x⁰, M v⁰)`` row-wise (eq. (2.4), label ``eq:eul2``).
+    """``(M x⁰, M v⁰)`` row-wise (eq. (2.4)).
 
     Parameters
     ----------

@@ -2,10 +2,10 @@ r"""The main job (``kinred demo`` / ``make demo``): the kinetic pipeline end to 
 
 On built-in defaults: a phase-space measure on ``ℝ²ᵈ`` with ``d = 100`` whose coordinate
 widths decay (``σⱼ = 1.6·0.5ʲ`` in positions and velocities) is quantized with the
-delayed-curse budget (eq. (4.22), label ``delayed``); the weighted Cucker–Smale particle
+delayed-curse budget (eq. (4.22)); the weighted Cucker–Smale particle
 system gives ``μᴺ(t)``; for ``k ∈ {2, 5, 10, 25}`` a Gaussian JL matrix ``M`` starts the reduced
 system from ``M#μ₀ᴺ``; ``W1(M#μᴺ(t), νᴺ(t))`` (exact, POT) is set beside Theorem 4.3's bound
-(eq. (4.17), label ``eq:approxkin``, with the proof's constants) and a finer reference
+(eq. (4.17), with the proof's constants) and a finer reference
 estimates ``W1(μ_M(t), ν(t))``; flocking verdicts are given for every system. It is a
 :mod:`kinred.experiments.kinetic_run` scene (:data:`DEMO_SCENE`), so the output folder has the
 same layout as ``kinred run``'s.

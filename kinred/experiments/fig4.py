@@ -10,7 +10,7 @@ with ``w`` the projected simulation (eq. (2.15)).
 
 Right panel: initial data with 80 % zero entries, L ∈ {1, 2, 3, 5, 7, 9} independent
 projections into k = 20 (eq. (3.17)), the velocity trajectories recovered by ℓ1 minimization
-(problem (3.16), label ``P1:eta``) from the stacked system [M¹; …; Mᴸ] v = [w¹; …; wᴸ] − η,
+(problem (3.16)) from the stacked system [M¹; …; Mᴸ] v = [w¹; …; wᴸ] − η,
 one batched solve over all agents and saved times; the relative recovery error
 
 .. math:: e_{\\rm rec}(t) = \\Big(\\sum_i \\|v^\\sharp_i(t) - v_i(t)\\|^2 \\big/ \\sum_i \\|v_i(t)\\|^2\\Big)^{1/2}.

@@ -18,9 +18,9 @@ when no effect depends on absolute velocities, and ``v̄ = 0`` with self-propuls
 
 where each effect adds to ``(Δ, p, κ)`` (``C = Σⱼ cⱼ``, 1 for ``normalize="mean"``):
 
-* alignment ``Σⱼ cⱼ g(‖·‖)(vⱼ − vᵢ)`` with ``g ≥ 0`` (eq. (2.13), label ``CS2``):
+* alignment ``Σⱼ cⱼ g(‖·‖)(vⱼ − vᵢ)`` with ``g ≥ 0`` (eq. (2.13)):
   ``dQ/dt = −Σᵢⱼ wᵢ cⱼ gᵢⱼ ‖vᵢ − vⱼ‖² ≤ 0`` (``wᵢcⱼ`` is symmetric): nothing;
-* attraction–repulsion with a Morse potential (eq. (3.14), label ``DOrsogna2``): the
+* attraction–repulsion with a Morse potential (eq. (3.14)): the
   kinetic energy ``Q/2`` trades with ``½ Σᵢⱼ wᵢcⱼ U(‖xᵢ − xⱼ‖) ∈ ½C·[−C_a, C_r]``:
   ``Δ += C (C_a + C_r)``;
 * self-propulsion ``(a − b‖v‖²) v``: ``p += a²/(2b)`` (``b > 0``), ``κ += a`` (``b = 0``);

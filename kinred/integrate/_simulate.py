@@ -94,7 +94,7 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
              observers=None) -> Trajectory:
     r"""Integrate a scene from ``(x0, v0)`` over ``t_span``.
 
-    Forward Euler is the paper's scheme (eq. (1.6), label ``eq:eul1``; on a projected scene
+    Forward Euler is the paper's scheme (eq. (1.6); on a projected scene
     it is eq. (2.4)–(2.5)). When every effect is translation invariant the run is carried out
     in coordinates relative to the initial centroid (positions are shifted back when saved),
     which keeps distances accurate for clouds far from the origin.

@@ -5,7 +5,7 @@ The data flow of §4.3: a phase-space measure ``μ₀`` on ``ℝ²ᵈ`` is quant
 projected atoms ``M#μ₀ᴺ`` start the reduced system in ``ℝ²ᵏ`` (:func:`reduce`), giving
 ``νᴺ(t)``; :func:`compare` computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly (a certified bracket above
 :data:`MAX_POT_ATOMS` atoms) and :func:`theorem_bound`
-the right-hand side of eq. (4.17) (label ``eq:approxkin``) with the constants of its proof.
+the right-hand side of eq. (4.17) with the constants of its proof.
 See docs/kinetic.md.
 """
 

@@ -1,4 +1,4 @@
-r"""The right-hand side of Theorem 4.3 (eq. (4.17), label ``eq:approxkin``) with the proof's constants.
+r"""The right-hand side of Theorem 4.3 (eq. (4.17)) with the proof's constants.
 
 The proof of Theorem 4.3 splits
 
@@ -10,21 +10,21 @@ The proof of Theorem 4.3 splits
 
 so kinred evaluates :math:`B(t) = 2C(t)\|M\|\varepsilon + \sqrt2\,D(t)\varepsilon_{JL}` with
 
-* ``ε`` -- the quantizer's bound ``W1(μ₀, μ₀ᴺ) ≤ ε`` (eq. (4.14), label ``epskin``);
-* ``ε_JL`` -- the distortion (3.4) (label ``Cont-JL``) of ``M`` measured along the particle
+* ``ε`` -- the quantizer's bound ``W1(μ₀, μ₀ᴺ) ≤ ε`` (eq. (4.14));
+* ``ε_JL`` -- the distortion (3.4) of ``M`` measured along the particle
   trajectories with :func:`kinred.projection.trajectory_distortion`, on the distances the
   effects depend on (positions for kernels of ``‖xᵢ − xⱼ‖``, velocities for kernels of
   ``‖vᵢ − vⱼ‖``, speeds ``‖vᵢ‖`` -- distances to the paper's auxiliary zero particle, §3.3.2 --
   for self-propulsion): the Lipschitz conditions (1.2)–(1.4) only see those distances, so
   (3.3) and (3.4) are only needed on them;
-* ``D(t) ε_JL`` -- Theorem 3.1's estimate, the RHS of eq. (3.7) (label ``eq:unifstab2``):
+* ``D(t) ε_JL`` -- Theorem 3.1's estimate, the RHS of eq. (3.7):
 
   .. math:: D(t)\,\varepsilon_{JL} = \varepsilon_{JL}\,\alpha\, t\,(L\|M\| + L''\beta)
             \exp\bigl[(2L\|M\| + 2\beta L'' + L')\,t\bigr],
 
   applied to the ``2N`` variables ``x₁..x_N, v₁..v_N`` of ``ℝᵈ`` (the arrangement of §2.3),
   so a particle's error in ``ℝ²ᵏ`` is at most ``√2·E(t)`` -- hence the factor ``√2``;
-* ``C(t)`` -- the W1 stability constant of eq. (4.6) (label ``stability``). kinred uses
+* ``C(t)`` -- the W1 stability constant of eq. (4.6). kinred uses
   Dobrushin's estimate (F. Golse, *On the dynamics of large particle systems in the mean
   field limit*, 2016, Thm. 3.3; the paper's reference [CCR], §3–4): if the particle field
   ``F(z, μ) = (v, H[μ](x, v))`` satisfies
@@ -96,11 +96,11 @@ class EffectConstants:
     ----------
     effect : str
     L : float
-        Contribution to ``L`` of (1.2) (label ``eq:condf1``).
+        Contribution to ``L`` of (1.2).
     Lp : float
-        Contribution to ``Σⱼ|fᵢⱼ|`` of a velocity row, (1.3) (label ``eq:condf2``).
+        Contribution to ``Σⱼ|fᵢⱼ|`` of a velocity row, (1.3).
     Lpp : float
-        Contribution to ``L″`` of (1.4) (label ``eq:condf3``).
+        Contribution to ``L″`` of (1.4).
     lip_state, lip_measure : float
         Lipschitz constants of the velocity field in the particle state and in the measure
         (W1), entering ``Λ = Λ_z + Λ_μ``.
@@ -188,7 +188,7 @@ def effect_constants(effect, *, coef_sum: float = 1.0, speed: float = 0.0, diam_
 
 
 def d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M):
-    r"""Theorem 3.1's estimate, the RHS of eq. (3.7) (label ``eq:unifstab2``).
+    r"""Theorem 3.1's estimate, the RHS of eq. (3.7).
 
     .. math:: \mathcal E(t) \le \varepsilon\,\alpha\,t\,(L\|M\| + L''\beta)
               \exp\bigl[(2L\|M\| + 2\beta L'' + L')\,t\bigr]
@@ -210,7 +210,7 @@ def d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M):
 
 
 def stability_constant(t, Lambda):
-    r"""``C(t) = exp(Λ t)``: Dobrushin's W1 stability constant (eq. (4.6), label ``stability``).
+    r"""``C(t) = exp(Λ t)``: Dobrushin's W1 stability constant (eq. (4.6)).
 
     Examples
     --------
@@ -318,7 +318,7 @@ def _speed_distortion(P, V) -> np.ndarray:
 
 
 def theorem_bound(solution, reduced, *, eps: float | None = None) -> TheoremBound:
-    r"""Evaluate the RHS of eq. (4.17) (label ``eq:approxkin``) with the proof's constants.
+    r"""Evaluate the RHS of eq. (4.17) with the proof's constants.
 
     See the module documentation for every constant and where it comes from.
 

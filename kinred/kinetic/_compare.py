@@ -9,7 +9,7 @@ What is exact and what is an estimate
   lower bound, index-coupling upper bound, ``O(N log N)``), with the
   index coupling ``Σᵢ wᵢ ‖(Mxᵢ, Mvᵢ) − (yᵢ, wᵢ)‖`` (an upper bound, the one the proof of
   Theorem 4.3 uses) and the uniform error ``E(t) = max`` over the ``2N`` variables of
-  Theorem 3.1 (eq. (3.7), label ``eq:unifstab2``).
+  Theorem 3.1 (eq. (3.7)).
 * :func:`reference_estimate` -- with a finer reference (more atoms ``N′``),
   ``W1(M#μᴺ′(t), νᴺ′(t))`` (exact for the reference atoms) is an **estimate** of the
   continuum ``W1(μ_M(t), ν(t))``, off by at most ``W1(μ_M, M#μᴺ′) + W1(ν, νᴺ′)`` (unknown;

@@ -1,15 +1,15 @@
 r"""Particle solutions of the mean-field equation and of its reduced (projected) version.
 
 * :func:`solve` -- quantize a phase-space measure ``μ₀`` on ``ℝ²ᵈ`` (first ``d`` coordinates
-  positions, last ``d`` velocities) with the delayed-curse budget (eq. (4.14), label
-  ``epskin``, and eq. (4.22), label ``delayed``), and run the *weighted* particle system
-  (eq. (4.2)–(4.3), labels ``eq:dyn4``–``eq:dyn5``): atom weights become agent weights, so
-  that ``μᴺ(t) = Σᵢ wᵢ δ_{(xᵢ(t), vᵢ(t))}`` is the measure solution of eq. (4.1) (label
-  ``genkin``) started from ``μ₀ᴺ``.
-* :func:`reduce` -- the reduced solution ``νᴺ(t)`` of eq. (4.10) (label ``genkin3``) started from
-  ``M#μ₀ᴺ`` (eq. (4.9), label ``projatom``), where ``M`` acts on ``(x, v)`` as the block matrix
-  ``diag(M, M)``; it is the particle system of the projected scene (eq. (3.5), label
-  ``lowdimsys``) with the same weights.
+  positions, last ``d`` velocities) with the delayed-curse budget (eq. (4.14)
+  and eq. (4.22)), and run the *weighted* particle system
+  (eq. (4.2)–(4.3)): atom weights become agent weights, so
+  that ``μᴺ(t) = Σᵢ wᵢ δ_{(xᵢ(t), vᵢ(t))}`` is the measure solution of eq. (4.1)
+  started from ``μ₀ᴺ``.
+* :func:`reduce` -- the reduced solution ``νᴺ(t)`` of eq. (4.10) started from
+  ``M#μ₀ᴺ`` (eq. (4.9)), where ``M`` acts on ``(x, v)`` as the block matrix
+  ``diag(M, M)``; it is the particle system of the projected scene (eq. (3.5))
+  with the same weights.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ class KineticSolution:
     weights : (N,) ndarray
         Atom weights (sum one), constant in time.
     eps : float
-        Quantization bound: ``W1(μ₀, μ₀ᴺ) ≤ eps`` (eq. (4.14), label ``epskin``), the a-priori
+        Quantization bound: ``W1(μ₀, μ₀ᴺ) ≤ eps`` (eq. (4.14)), the a-priori
         bound of the quantizer (0 when ``μ₀`` was already atomic).
     n_atoms : int
         ``N``.
@@ -174,12 +174,12 @@ def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
     r"""Particle solution ``μᴺ(t)`` of the mean-field equation started from quantized ``μ₀``.
 
     ``μ₀`` is quantized by :func:`kinred.quantize.quantize` (tensor products with the
-    delayed-curse budget, eq. (4.22), label ``delayed``; mixtures by Lemma 4.2), so that
+    delayed-curse budget, eq. (4.22); mixtures by Lemma 4.2), so that
 
     .. math:: W_1(\mu_0, \mu_0^N) \le \varepsilon, \qquad
               \mu_0^N = \sum_{i=1}^N w_i\,\delta_{(x_i^0, v_i^0)}
 
-    (eq. (4.14), label ``epskin``), and the weighted particle system
+    (eq. (4.14)), and the weighted particle system
     ``ẋᵢ = vᵢ, v̇ᵢ = H[μᴺ](xᵢ, vᵢ)`` (eq. (4.2)–(4.3)) is integrated.
 
     Parameters
@@ -259,13 +259,13 @@ def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
 
 def reduce(solution, scene=None, M=None, *, t_span=None, dt=None, method=None, times=None,
            seed=None) -> ReducedSolution:
-    r"""Reduced solution ``νᴺ(t)`` of eq. (4.10) (label ``genkin3``) started from ``M#μ₀ᴺ``.
+    r"""Reduced solution ``νᴺ(t)`` of eq. (4.10) started from ``M#μ₀ᴺ``.
 
     .. math:: \nu^N(0) = \sum_i w_i\,\delta_{(M x_i^0,\, M v_i^0)}, \qquad
               \dot y_i = w_i,\quad \dot w_i = H_M[\nu^N](y_i, w_i)
 
     with the projected scene (pairwise kernels see projected distances, per-agent terms are
-    multiplied by ``M``; eq. (3.5), label ``lowdimsys``).
+    multiplied by ``M``; eq. (3.5)).
 
     Parameters
     ----------

@@ -1,8 +1,8 @@
 """Measures on ℝᵈ: the objects the paper quantizes, pushes forward and compares in W1.
 
 Every measure has ``dim``, ``sample(n, seed=None) -> (n, dim)``, ``support_widths()`` (the
-σⱼ of §4.5) and ``push(M)`` (eq. (4.8), label ``pf``). :class:`Atomic` measures push exactly,
-eq. (4.9) (label ``projatom``). See :mod:`kinred.quantize` for atoms with error bounds and
+σⱼ of §4.5) and ``push(M)`` (eq. (4.8)). :class:`Atomic` measures push exactly,
+eq. (4.9). See :mod:`kinred.quantize` for atoms with error bounds and
 :func:`load_measure` for the TOML measure files of ``kinred quantize``.
 """
 

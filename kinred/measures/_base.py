@@ -20,8 +20,8 @@ class Measure:
     * ``sample(n, seed=None) -> (n, d) ndarray`` -- ``n`` independent draws;
     * ``support_box() -> (lo (d,), hi (d,))`` -- a coordinate box containing the support;
     * ``support_widths() -> (d,) ndarray`` -- the widths ``σⱼ = bⱼ − aⱼ`` of that box, the
-      quantities that drive the delayed-curse budget, eq. (4.22) of the paper (label ``delayed``);
-    * ``push(M) -> Measure`` -- the push-forward ``M#μ`` of eq. (4.8) (label ``pf``).
+      quantities that drive the delayed-curse budget, eq. (4.22) of the paper;
+    * ``push(M) -> Measure`` -- the push-forward ``M#μ`` of eq. (4.8).
 
     Subclasses implement ``_sample(n, rng)`` and ``support_box``.
     """
@@ -58,7 +58,7 @@ class Measure:
     def push(self, M) -> "Measure":
         """Push-forward ``M#μ`` by a linear map ``M`` (``(k, d)`` ndarray or ``Projection``).
 
-        eq. (4.8) of the paper (label ``pf``): ``(M#μ)(B) = μ(M⁻¹(B))``. Atomic measures push
+        eq. (4.8) of the paper: ``(M#μ)(B) = μ(M⁻¹(B))``. Atomic measures push
         exactly (:meth:`Atomic.push`); other measures return a :class:`PushForward`.
         """
         return PushForward(self, M)
@@ -79,7 +79,7 @@ def _projection(M, d: int):
 class PushForward(Measure):
     """The image measure ``M#μ`` of ``base`` under a linear map ``M: ℝᵈ → ℝᵏ``.
 
-    eq. (4.8) of the paper (label ``pf``): :math:`\\int \\varphi\\, d(M\\#\\mu) =
+    eq. (4.8) of the paper: :math:`\\int \\varphi\\, d(M\\#\\mu) =
     \\int \\varphi(Mx)\\, d\\mu(x)`. Sampling draws from the base and maps the draws.
     Its support box is the image of the base's box, which per output coordinate has width
 
@@ -146,7 +146,7 @@ class Atomic(Measure):
 
     Notes
     -----
-    :meth:`push` is exact, eq. (4.9) of the paper (label ``projatom``):
+    :meth:`push` is exact, eq. (4.9) of the paper:
     :math:`M\\#\\bigl(\\sum_i w_i\\delta_{x_i}\\bigr) = \\sum_i w_i \\delta_{Mx_i}`.
 
     Examples

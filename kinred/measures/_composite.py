@@ -14,8 +14,8 @@ __all__ = ["TensorProduct", "Mixture"]
 class TensorProduct(Measure):
     """Product measure ``μ¹ ⊗ … ⊗ μᵈ`` of 1-D measures (coordinates independent).
 
-    The setting of Lemma 4.1 of the paper (label ``lem:W:tensors``) and of the delayed curse
-    of dimension, eq. (4.22) (label ``delayed``).
+    The setting of Lemma 4.1 of the paper and of the delayed curse
+    of dimension, eq. (4.22).
 
     Parameters
     ----------
@@ -71,7 +71,7 @@ class TensorProduct(Measure):
 class Mixture(Measure):
     """Finite mixture ``Σₗ wₗ μₗ`` of measures of one dimension.
 
-    The setting of Lemma 4.2 of the paper (label ``lem:W:sums``); a mixture of anisotropic
+    The setting of Lemma 4.2 of the paper; a mixture of anisotropic
     tensor products quantizes to the sparse-grid atoms of §4.5.
 
     Parameters

@@ -1,7 +1,7 @@
 r"""The pair-sum protocol and what a scene's pairwise effects call for.
 
 A scene's pairwise effects (:class:`~kinred.dynamics.PairwiseEffect`, the paper's class
-(1.1), label ``eq:dyn``, with ``f_ij = c_j φ(D)``) all reduce to pair sums
+(1.1), with ``f_ij = c_j φ(D)``) all reduce to pair sums
 
 .. math:: \bigl(\text{target}\bigr)_i \mathrel{+}= \sum_j c_j\, \varphi(\|s_i - s_j\|)\,(z_j - z_i)
 

@@ -1,7 +1,7 @@
 r"""The random batch pair-sum backend (RBM): pair sums inside random batches of ``p`` agents.
 
-:class:`RandomBatch` replaces every pair sum of a scene (the paper's class (1.1), label
-``eq:dyn``, with ``f_ij = c_j φ(D)``)
+:class:`RandomBatch` replaces every pair sum of a scene (the paper's class (1.1),
+with ``f_ij = c_j φ(D)``)
 
 .. math:: F_i = \sum_{j} c_j\, \varphi(\|s_i - s_j\|)\,(z_j - z_i)
 
@@ -25,7 +25,7 @@ need no weighted sampling for unbiasedness (each pair is equally likely whatever
 variance is then larger for heavy agents, a price paid only in the error constant.
 
 Time stepping. The RBM is defined with one partition per time step: with the forward Euler
-scheme of ``simulate`` (``method="euler"``, the paper's eq. (1.6), label ``eq:eul1``) one
+scheme of ``simulate`` (``method="euler"``, the paper's eq. (1.6)) one
 evaluation is one step and this backend *is* RBM-1. Every evaluation draws a new partition,
 so a multi-stage method (RK4, adaptive pairs) sees an independent, still unbiased, estimate in
 each stage: that is not the published scheme and gains no order (the error stays

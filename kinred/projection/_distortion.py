@@ -1,8 +1,8 @@
 """Measured distortion of a projection on point clouds and along trajectories.
 
-* :func:`distortion` — the worst :math:`1 \\pm \\varepsilon` of eq. (2.1) (label ``JLlem``)
+* :func:`distortion` — the worst :math:`1 \\pm \\varepsilon` of eq. (2.1)
   over all pairs of a point cloud, in **squared** distances, as Lemma 2.1 states it.
-* :func:`trajectory_distortion` — condition (3.4) (label ``Cont-JL``) of Theorem 3.2 along a
+* :func:`trajectory_distortion` — condition (3.4) of Theorem 3.2 along a
   simulated trajectory, in **non-squared** distances, as (3.4) states it, for every saved time.
 
 Pairwise differences are formed explicitly (never through the Gram identity
@@ -34,7 +34,7 @@ _BLOCK_BUDGET = 1 << 22  # numbers per block of pairwise differences
 
 @dataclass(frozen=True)
 class DistortionResult:
-    """Worst pairwise distortion of a projection on a point cloud (eq. (2.1), label ``JLlem``).
+    """Worst pairwise distortion of a projection on a point cloud (eq. (2.1)).
 
     Attributes
     ----------
@@ -65,7 +65,7 @@ class DistortionResult:
 
 @dataclass(frozen=True)
 class TrajectoryDistortionResult:
-    """Condition (3.4) (label ``Cont-JL``) measured along a trajectory.
+    """Condition (3.4) measured along a trajectory.
 
     Attributes
     ----------
@@ -145,7 +145,7 @@ def _pair_extremes(X: np.ndarray, Y: np.ndarray):
 
 
 def distortion(M, points) -> DistortionResult:
-    """Worst distortion of ``M`` over all pairs of ``points`` (eq. (2.1), label ``JLlem``).
+    """Worst distortion of ``M`` over all pairs of ``points`` (eq. (2.1)).
 
     .. math::
 
@@ -199,7 +199,7 @@ def distortion(M, points) -> DistortionResult:
 
 
 def trajectory_distortion(M, traj_x) -> TrajectoryDistortionResult:
-    """Condition (3.4) (label ``Cont-JL``) of Theorem 3.2 measured along a trajectory.
+    """Condition (3.4) of Theorem 3.2 measured along a trajectory.
 
     .. math::
 
@@ -207,8 +207,8 @@ def trajectory_distortion(M, traj_x) -> TrajectoryDistortionResult:
         \\Bigl|\\frac{\\|Mx_i(t) - Mx_j(t)\\|}{\\|x_i(t) - x_j(t)\\|} - 1\\Bigr|
 
     (non-squared distances, as (3.4) is stated), with the per-time worst ``eps_t``. Only the
-    saved times are checked; Theorem 3.3 (label ``thmcontJL``) bounds what happens between
-    them through the ratio γ of condition (3.12) (label ``Cond-contJL``). Cost
+    saved times are checked; Theorem 3.3 bounds what happens between
+    them through the ratio γ of condition (3.12). Cost
     :math:`O(T N^2 d)` — subsample times (``traj_x[::s]``) for long runs.
 
     Parameters

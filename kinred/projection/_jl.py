@@ -14,7 +14,7 @@ Four kinds, all normalized so that :math:`\\mathbb E\\|Mx\\|^2 = \\|x\\|^2` for 
     as a ``scipy.sparse`` CSR matrix (density 1/3) and applied sparsely.
 ``"srht"``
     Subsampled randomized Hadamard transform, a fast structured map in the spirit of
-    Krahmer–Ward (Theorem 3.6 of the paper, label ``KWthm``):
+    Krahmer–Ward (Theorem 3.6 of the paper):
     :math:`M = \\sqrt{d'/k}\\, P H D`, with :math:`D` a diagonal of random signs (the
     Rademacher sequence :math:`\\xi` of Theorem 3.6), :math:`H` the orthonormal Walsh–Hadamard
     matrix of order :math:`d' = 2^{\\lceil \\log_2 d\\rceil}` acting on ``x`` padded with zeros,
@@ -29,7 +29,7 @@ For both structured kinds :math:`\\mathbb E\\|Mx\\|^2 = \\tfrac{d'}{k}\\,\\mathb
 \\tfrac{d'}{k}\\tfrac{k}{d'}\\|HDx\\|^2 = \\|x\\|^2`. Their rows are orthonormal up to the factor
 :math:`\\sqrt{d'/k}` when :math:`H` acts without padding (``"dct"``, or ``"srht"`` with ``d`` a
 power of two), hence :math:`\\|M\\| = \\sqrt{d'/k}` exactly — the bound
-:math:`\\|M\\| \\le \\sqrt{d/k}` assumed in Theorem 3.3 of the paper (label ``thmcontJL``) holds
+:math:`\\|M\\| \\le \\sqrt{d/k}` assumed in Theorem 3.3 of the paper holds
 with equality. With padding (``"srht"``, ``d`` not a power of two) the columns are cut to the
 first ``d`` and :math:`\\|M\\| \\le \\sqrt{d'/k}`; :meth:`SRHTProjection.norm` computes it.
 """
@@ -263,7 +263,7 @@ class SRHTProjection(Projection):
 # Factory
 # ----------------------------------------------------------------------------------------------
 def jl_matrix(k: int, d: int, kind: str = "gaussian", seed=None) -> Projection:
-    """Draw a random Johnson–Lindenstrauss map ``M: ℝᵈ → ℝᵏ`` (Lemma 2.1, eq. (2.1), label ``JLlem``).
+    """Draw a random Johnson–Lindenstrauss map ``M: ℝᵈ → ℝᵏ`` (Lemma 2.1, eq. (2.1)).
 
     With :math:`k \\ge` :func:`jl_min_dim` ``(n, ε)``, ``M`` satisfies, with high probability,
     for all pairs of ``n`` given points
@@ -346,7 +346,7 @@ def jl_min_dim(n_points, eps):
     (Dasgupta & Gupta, *An elementary proof of a theorem of Johnson and Lindenstrauss*, 2003,
     Theorem 2.1 — reference [DG] of the paper; the same formula as scikit-learn's
     ``johnson_lindenstrauss_min_dim``). For such ``k`` a Gaussian ``M`` satisfies eq. (2.1)
-    (label ``JLlem``) for all pairs of ``n`` points with probability at least :math:`1/n`
+    for all pairs of ``n`` points with probability at least :math:`1/n`
     per draw in the original statement — in practice with overwhelming probability. The
     result is rounded **up** (``ceil``) so that ``k`` satisfies the inequality; scikit-learn
     truncates and can return a value one below it.

@@ -37,7 +37,7 @@ def _ratio(x: float, n: int) -> float:
 
 @dataclass(frozen=True, eq=False)
 class Recipe:
-    """The paper's simple recipe of §4.5 for eq. (4.22) (label ``delayed``).
+    """The paper's simple recipe of §4.5 for eq. (4.22).
 
     With ``σ`` sorted decreasingly, ``k_bar`` is the smallest k̄ with
     :math:`\\sum_{k>\\bar k} c\\sigma_k \\le \\varepsilon/2`, and a common
@@ -111,7 +111,7 @@ def _ends(values, fmt, head: int = 4, tail: int = 2) -> str:
 
 
 def paper_recipe(widths, eps: float, *, rule: str = "midpoint") -> Recipe:
-    """The paper's recipe for eq. (4.22) (label ``delayed``); see :class:`Recipe`.
+    """The paper's recipe for eq. (4.22); see :class:`Recipe`.
 
     Examples
     --------
@@ -447,10 +447,10 @@ def _local_atoms(s, N, P, max_moves):
 
 def budget(widths, *, eps: float | None = None, atoms: int | None = None,
            rule: str = "midpoint", node_limit: int = 20000) -> Budget:
-    """Atoms per coordinate for the delayed curse of dimension, eq. (4.22) of the paper (label ``delayed``).
+    """Atoms per coordinate for the delayed curse of dimension, eq. (4.22) of the paper.
 
     A tensor product of 1-D laws of widths σⱼ, each quantized with ``N_j`` atoms, has
-    (Lemma 4.1, label ``lem:W:tensors``, with the 1-D bound ``c σ / N``)
+    (Lemma 4.1, with the 1-D bound ``c σ / N``)
 
     .. math:: W_1(\\mu, \\mu^N) \\le \\sum_j \\frac{c\\,\\sigma_j}{N_j}, \\qquad N = \\prod_j N_j,
 

@@ -394,8 +394,7 @@ def preflight(mu: Measure, *, eps: float | None = None, atoms: int | None = None
               rule: str = "midpoint", node_limit: int = 20000) -> Preflight:
     """Sizes of ``quantize(mu, ...)`` and its ``materialize()``, without building anything.
 
-    The counts come from the same plan as :func:`quantize` (budgets of eq. (4.22), label
-    ``delayed``, are integer arithmetic); the bytes from the size model: 24 bytes per
+    The counts come from the same plan as :func:`quantize` (budgets of eq. (4.22), are integer arithmetic); the bytes from the size model: 24 bytes per
     per-coordinate quantile point, ``9·dim + 24`` per materialized atom, plus one bounded chunk
     of temporaries and 1 MiB of Python objects. Both calls refuse when their figure exceeds
     the memory limit.
@@ -417,8 +416,7 @@ def preflight(mu: Measure, *, eps: float | None = None, atoms: int | None = None
 def quantize_1d(mu, n: int, *, rule: str = "midpoint", max_bytes=None) -> Quantization1D:
     """``n`` equal-weight atoms at quantile levels of a 1-D measure.
 
-    ``rule="paper"``: levels ``i/N``, ``i = 0..N−1`` (so ``x₀ = a``), eq. (4.20) of the paper
-    (label ``quantiles``), with bound ``σ/N`` (eq. (4.21), label ``quantiles2``).
+    ``rule="paper"``: levels ``i/N``, ``i = 0..N−1`` (so ``x₀ = a``), eq. (4.20) of the paper, with bound ``σ/N`` (eq. (4.21)).
     ``rule="midpoint"`` (default, W1-optimal): levels ``(2i−1)/(2N)``, ``i = 1..N``, the medians
     of the N quantile cells, with bound ``σ/(2N)``:
 
@@ -460,7 +458,7 @@ def quantize(mu: Measure, *, eps: float | None = None, atoms: int | None = None,
 
     * 1-D laws: :func:`quantize_1d` with the fewest atoms meeting ``eps`` (or ``atoms``).
     * :class:`~kinred.measures.TensorProduct`: a grid whose per-coordinate counts come from
-      :func:`~kinred.quantize.budget` (delayed curse, eq. (4.22), label ``delayed``).
+      :func:`~kinred.quantize.budget` (delayed curse, eq. (4.22)).
     * :class:`~kinred.measures.Mixture`: a union of component quantizations (Lemma 4.2); with
       ``eps`` every component gets accuracy ``eps`` (so ``Σ wₗ εₗ ≤ eps``), with ``atoms`` the
       smallest common component accuracy whose total count fits is found by bisection (the

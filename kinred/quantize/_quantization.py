@@ -265,7 +265,7 @@ class AtomicQuantization(Quantization):
 
 @dataclass(frozen=True, eq=False, repr=False)
 class TensorQuantization(Quantization):
-    """Grid of per-coordinate quantizations: Lemma 4.1 of the paper (label ``lem:W:tensors``).
+    """Grid of per-coordinate quantizations: Lemma 4.1 of the paper.
 
     .. math:: W_1(\\mu^1\\otimes\\cdots\\otimes\\mu^d, \\mu^N) \\le \\sum_j \\varepsilon_j,
               \\qquad N = \\prod_j N_j .
@@ -338,7 +338,7 @@ class TensorQuantization(Quantization):
 class MixtureQuantization(Quantization):
     """Union of per-component quantizations, weights ``wₗ·(component weights)``.
 
-    Lemma 4.2 of the paper (label ``lem:W:sums``), generalized to unequal weights and unequal
+    Lemma 4.2 of the paper, generalized to unequal weights and unequal
     atom counts by the same homogeneity/subadditivity argument:
 
     .. math:: W_1\\Bigl(\\sum_l w_l\\mu_l, \\sum_l w_l\\mu_l^{N_l}\\Bigr) \\le \\sum_l w_l\\,\\varepsilon_l .
@@ -394,9 +394,9 @@ class MixtureQuantization(Quantization):
 
 @dataclass(frozen=True, eq=False, repr=False)
 class PushQuantization(Quantization):
-    """Quantization of ``M#μ``: atoms of ``μ`` pushed by ``M`` (eq. (4.9), label ``projatom``).
+    """Quantization of ``M#μ``: atoms of ``μ`` pushed by ``M`` (eq. (4.9)).
 
-    Bound and error are those of the base times ``‖M‖`` (eq. (4.8), label ``pf``:
+    Bound and error are those of the base times ``‖M‖`` (eq. (4.8):
     ``W1(M#μ, M#ν) ≤ ‖M‖ W1(μ, ν)``); ``error_kind="upper"``.
     """
 

@@ -1,6 +1,6 @@
 """Batched ℓ1 recovery of high-dimensional vectors from stacked projections (§3.3.1 of the paper).
 
-* :func:`basis_pursuit` / :func:`lasso` — many problems (3.16) (label ``P1:eta``) sharing one
+* :func:`basis_pursuit` / :func:`lasso` — many problems (3.16) sharing one
   matrix, solved by batched ADMM with a certified polish; :class:`RecoveryResult`.
 * :func:`estimate_eta` — the automatic noise level (cross-validation over the L blocks).
 * :func:`recover` — x♯ᵢ(t) from L projected simulations (3.17), with the §3.4.2 error.

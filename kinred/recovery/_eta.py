@@ -1,8 +1,8 @@
 r"""Automatic choice of the noise level η of (3.16) from the data.
 
-With ``L`` independent projected simulations (3.17) (label ``eq:paral1``), the stacked data of
+With ``L`` independent projected simulations (3.17), the stacked data of
 one agent at one time is ``y = 𝓜x + e`` with ``e = (e¹; …; eᴸ)`` the projected-simulation
-errors, ``‖eˡ‖ ≤ C(t)ε`` by (3.15) (label ``approxk``). Since ``m = kL < d`` in the regime of
+errors, ``‖eˡ‖ ≤ C(t)ε`` by (3.15). Since ``m = kL < d`` in the regime of
 interest, a least-squares fit interpolates ``y`` and its residual says nothing about ``e``.
 The rule implemented uses the disagreement between the independent projections instead:
 
@@ -95,7 +95,7 @@ def estimate_eta(
     tol: float = 1e-4,
     max_iter: int = 500,
 ) -> EtaEstimate:
-    """Choose ``η`` for (3.16) (label ``P1:eta``) from the data (block cross-validated LASSO).
+    """Choose ``η`` for (3.16) from the data (block cross-validated LASSO).
 
     See the module docstring for the rule; in short ``η = σ̂ √(m + c√(2m))`` with ``σ̂`` the
     per-coordinate noise level: the degrees-of-freedom corrected residual of the LASSO whose

@@ -91,16 +91,16 @@ def recover(
 ) -> TrajectoryRecovery:
     """Recover ``x♯ᵢ(t) ∈ ℝᵈ`` from ``L`` projected simulations by ℓ1 minimization.
 
-    The ``L`` parallel systems (3.17) (label ``eq:paral1``) give, for each agent ``i`` and saved
+    The ``L`` parallel systems (3.17) give, for each agent ``i`` and saved
     time ``t``, the stacked data ``(y¹ᵢ(t); …; yᴸᵢ(t)) = 𝓜xᵢ(t) + eᵢ(t)`` with
-    ``𝓜 = [M¹; …; Mᴸ]``; each is solved as (3.16) (label ``P1:eta``)
+    ``𝓜 = [M¹; …; Mᴸ]``; each is solved as (3.16)
 
     .. math::
 
         x^\\sharp_i(t) = \\arg\\min_z \\|z\\|_1 \\ \\text{s.t.}\\ \\|\\mathcal M z - y_i(t)\\|_2 \\le \\eta
 
     in one batched solve over all ``T·N`` right-hand sides (:func:`basis_pursuit`). The error
-    bound is (3.19)/(3.21) (labels ``eq:paral3``, ``eq:paral5``).
+    bound is (3.19)/(3.21).
 
     Parameters
     ----------

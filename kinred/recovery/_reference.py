@@ -3,7 +3,7 @@
 * :func:`reference_basis_pursuit` — basis pursuit ``min ‖z‖₁ s.t. Az = y`` as the linear
   program ``min 1ᵀ(p + q) s.t. A(p − q) = y, p, q ≥ 0`` solved by HiGHS
   (:func:`scipy.optimize.linprog`); ``z = p − q``.
-* :func:`reference_bpdn` — basis-pursuit denoising (3.16) (label ``P1:eta``) as the
+* :func:`reference_bpdn` — basis-pursuit denoising (3.16) as the
   second-order cone program ``min 1ᵀ(p + q) s.t. ‖A(p − q) − y‖₂ ≤ η, p, q ≥ 0`` solved by
   Clarabel (an interior-point conic solver; an optional test dependency).
 * :func:`reference_lasso` — ``min ½‖Az − y‖² + λ‖z‖₁`` as a quadratic program in Clarabel.

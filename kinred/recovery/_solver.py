@@ -8,7 +8,7 @@ column by column to
     \\min_{z\\in\\mathbb R^d} \\|z\\|_{\\ell_1^d}
     \\quad\\text{s.t.}\\quad \\|Az - y\\|_{\\ell_2^m} \\le \\eta ,
 
-problem (3.16) of the paper (label ``P1:eta``), for all columns ``y`` of ``Y (m, n_rhs)`` at
+problem (3.16) of the paper, for all columns ``y`` of ``Y (m, n_rhs)`` at
 once, sharing one matrix ``A (m, d)``. With the variables ``u = z`` and ``v = Az``, one ADMM
 iteration is
 
@@ -168,8 +168,8 @@ def stack_projections(projections) -> np.ndarray:
     Parameters
     ----------
     projections : Projection, (m, d) ndarray, or sequence of Projection / (k_ℓ, d) ndarrays
-        One matrix, or the ``L`` projections of the parallel simulations (3.17) of the paper
-        (label ``eq:paral1``). All must share the source dimension ``d``.
+        One matrix, or the ``L`` projections of the parallel simulations (3.17) of the paper.
+        All must share the source dimension ``d``.
 
     Returns
     -------
@@ -730,14 +730,14 @@ def basis_pursuit(
 ) -> RecoveryResult:
     """Basis pursuit (``η = 0``) and basis-pursuit denoising for many right-hand sides.
 
-    Solves, for every column ``y`` of ``Y``, problem (3.16) of the paper (label ``P1:eta``)
+    Solves, for every column ``y`` of ``Y``, problem (3.16) of the paper
 
     .. math::
 
         \\min_{z\\in\\mathbb R^d} \\|z\\|_{1} \\quad\\text{s.t.}\\quad \\|Az - y\\|_2 \\le \\eta
 
     with one shared matrix ``A`` (e.g. the stacked 𝓜 = [M¹; …; Mᴸ] of the ``L`` parallel
-    projected simulations (3.17), label ``eq:paral1``), by batched ADMM with certified polish.
+    projected simulations (3.17)), by batched ADMM with certified polish.
 
     Parameters
     ----------
@@ -785,7 +785,7 @@ def lasso(
 ) -> RecoveryResult:
     """LASSO ``min ½‖Az − y‖² + λ‖z‖₁`` for many right-hand sides sharing ``A``.
 
-    The Lagrangian form of (3.16) (label ``P1:eta``): for each ``η`` there is a ``λ`` with the
+    The Lagrangian form of (3.16): for each ``η`` there is a ``λ`` with the
     same solution. Same batched ADMM as :func:`basis_pursuit`, with the ``v``-step
     ``v = (y + μ t)/(1 + μ)``.
 

@@ -1,6 +1,6 @@
 r"""Projected dimension ``k``, projection kind, and the engine's precision.
 
-Cucker–Smale alignment (eqs. (2.12)–(2.13), labels ``CS1``–``CS2``), forward Euler
+Cucker–Smale alignment (eqs. (2.12)–(2.13)), forward Euler
 (eq. (2.14)), simulated in ℝᵈ and, for every projected dimension ``k`` and projection kind,
 in ℝᵏ (eq. (2.15), projected scheme (2.4)–(2.5)); the setting of Table 1 (§3.4.1, sum
 convention, ``N·G`` kept at 800). The trajectory error is
@@ -8,8 +8,8 @@ convention, ``N·G`` kept at 800). The trajectory error is
 .. math:: e(t) = \Big(\sum_i \|y_i(t) - Mx_i(t)\|^2 \Big/
           \sum_i \|Mx_i(t) - M\bar x(t)\|^2\Big)^{1/2},
 
-relative to the spread of the projected cloud (the quantity bounded by eq. (3.15), label
-``approxk``, made scale free; the spread, not ``Σ‖Mxᵢ‖²``, so that moving the whole cloud
+relative to the spread of the projected cloud (the quantity bounded by eq. (3.15),
+made scale free; the spread, not ``Σ‖Mxᵢ‖²``, so that moving the whole cloud
 does not shrink it); reported at the final time and as the maximum over saved times, together
 with the agreement of the flocking verdict (the paper's rule on Γ(T), §3.4.1) with the full
 simulation's. The time of a projected run includes drawing ``M`` and projecting the initial

@@ -3,7 +3,7 @@
 Atoms from :func:`kinred.quantize.quantize` with an atom budget for two tensor products in the
 same dimension ``d``: *isotropic*, ``U[0,1]ᵈ`` (the curse: a grid with ``N`` atoms has error
 ∝ ``N^(−1/d)``), and *decaying*, ``U[0, ρʲ]`` for ``j = 0..d−1`` (the delayed curse, eq.
-(4.22), label ``delayed``). The error is the product-ℓ1 W1 (exact: the sum of exact 1-D
+(4.22)). The error is the product-ℓ1 W1 (exact: the sum of exact 1-D
 marginal errors, Lemma 4.1) -- an **upper bound** of the Euclidean W1 -- and, at small sizes,
 the exact Euclidean W1 (network simplex) to a much finer quantization. Time: budget + atoms
 (materialized).

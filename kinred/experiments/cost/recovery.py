@@ -1,8 +1,8 @@
 r"""Number of projections ``L`` and solver tolerance of the recovery.
 
 The setting of the paper's Figure 4 right (§3.4.2): initial data with 80 % zero entries,
-``L`` independent projections into ℝᵏ (eq. (3.17), label ``eq:paral1``), and the velocities
-recovered at the saved times by basis pursuit (problem (3.16), label ``P1:eta``, with η = 0;
+``L`` independent projections into ℝᵏ (eq. (3.17)), and the velocities
+recovered at the saved times by basis pursuit (problem (3.16), with η = 0;
 ``k L < d`` so the stacked system is underdetermined) from the stacked data, one batched
 :func:`kinred.recovery.basis_pursuit` solve per (L, tolerance). Error:
 
