@@ -11,6 +11,12 @@ distances). Built-in kernels also provide
   (vectorized; exact for Cucker–Smale and Quadratic), the localized Lipschitz constant of the
   mean-value theorem used by the certificates of :mod:`kinred.certify`.
 
+* ``radial_profile()`` – the kernel hook of the :class:`~kinred.pairsum.NUFFT` backend: a
+  vectorized callable ``φ(s)`` such that ``r ↦ φ(|r|)`` is smooth (``φ`` an even smooth
+  function of ``s``), or None when it is not; see :func:`kinred.pairsum.radial_profile`.
+  Cucker–Smale, ``Morse`` with ``soft > 0`` and ``Quadratic`` have one; ``Morse`` with
+  ``soft = 0`` (``u(s) ~ 1/s``) returns None.
+
 * ``compiled_form()`` – the kernel hook for compiled code: None, or ``(kind, a, b)`` naming
   a closed form of :data:`kinred.pairsum.COMPILED_KINDS` that equals the kernel (Cucker–Smale:
   ``("cs_halfint", G, 2β)`` or ``("cs_pow", G, β)``). The dense backend evaluates such
@@ -63,8 +69,9 @@ def _interval(lo, hi):
 class Kernel(Protocol):
     """Protocol of a pairwise kernel ``φ: [0, ∞) → ℝ``.
 
-    Only ``__call__`` is required; ``value_sq``, ``compiled_form``, ``sup_norm`` and
-    ``lipschitz`` are optional (the backends fall back to ``φ(√q)``; see the module notes).
+    Only ``__call__`` is required; ``value_sq``, ``compiled_form``, ``radial_profile``,
+    ``sup_norm`` and ``lipschitz`` are optional (the backends fall back to ``φ(√q)``; the
+    NUFFT backend needs ``radial_profile``; see the module notes).
     """
 
     def __call__(self, s): ...
@@ -122,6 +129,11 @@ class CuckerSmale:
     def __call__(self, s):
         s = np.asarray(s, dtype=float)
         return self.G * np.exp(-self.beta * np.log1p(s * s))
+
+    def radial_profile(self):
+        """The kernel itself: ``G (1 + s²)^(−β)`` is a smooth function of ``s²`` (analytic for
+        ``|Im s| < 1``), so it qualifies for the NUFFT backend."""
+        return self.__call__
 
     def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
         """``g(√q)`` for squared distances ``q (b, m)`` into ``out (b, m)``.
@@ -275,6 +287,13 @@ class Morse:
             out[r == 0.0] = 0.0
         return out
 
+    def radial_profile(self):
+        """``u`` itself when ``soft > 0`` (a smooth function of ``s² + soft²``, analytic for
+        ``|Im s| < soft``: the smaller ``soft``, the more Fourier modes the NUFFT backend
+        needs); None when ``soft = 0``, where ``u(s) = U′(s)/s`` is singular (``~ 1/s``, or
+        a cone ``|r|`` when ``U′(0) = 0``) at coincident agents."""
+        return self.__call__ if self.soft > 0 else None
+
     def force_sup(self) -> float:
         """``sup_{s>0} |U′(s)| <= max(Ca/la, Cr/lr)`` (a difference of two positive decreasing terms)."""
         return max(self.Ca / self.la, self.Cr / self.lr)
@@ -395,6 +414,10 @@ class Quadratic:
     def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
         out[...] = self.c
         return out
+
+    def radial_profile(self):
+        """The constant itself (one Fourier mode in the NUFFT backend)."""
+        return self.__call__
 
     def sup_norm(self) -> float:
         return abs(self.c)
