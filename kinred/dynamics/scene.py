@@ -80,7 +80,7 @@ class Scene:
         with ``G = 0.8`` reproduces the paper's §3.4 experiments).
     weights : (N,) array_like, optional
         Probability weights of the agents (validated: finite, >= 0, sum 1); default ``1/N``.
-    pairsum : PairSum or {"fast", "dense", "numpy"}, optional
+    pairsum : PairSum or {"fast", "dense", "numpy", "nufft"}, optional
         The pair-sum backend (:mod:`kinred.pairsum`): an object implementing
         :class:`~kinred.pairsum.PairSum`, ``"fast"``/``"dense"`` (default) for
         :class:`~kinred.pairsum.Dense` (exact, blocked BLAS/numba) or ``"numpy"`` for the

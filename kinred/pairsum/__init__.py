@@ -10,6 +10,9 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
 * :class:`Numpy` (``pairsum="numpy"``): the plain-numpy twin, the reference in tests.
 * :class:`RandomBatch` (``pairsum="random_batch"``, ``p = 2``): the random batch method,
   pair sums inside random batches of ``p`` agents, unbiased, ``O(N p d)`` per evaluation.
+* :class:`NUFFT` (``pairsum="nufft"``): fast summation of smooth radial kernels by
+  non-equispaced FFTs (finufft) for distances in ``k ≤ 3`` dimensions, ``O(N + n^k log n)``
+  at a requested relative accuracy ``tol``; kernels declare ``radial_profile()``.
 
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
@@ -18,8 +21,10 @@ through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form
 from ._select import as_pairsum
 from .dense import Dense, DensePlan
+from .nufft import NUFFT, NUFFTPlan, radial_profile
 from .random_batch import RandomBatch, RandomBatchPlan
 from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
-           "RandomBatch", "RandomBatchPlan", "as_pairsum", "compiled_form", "COMPILED_KINDS"]
+           "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
+           "radial_profile", "COMPILED_KINDS"]

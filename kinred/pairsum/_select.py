@@ -5,13 +5,17 @@ from __future__ import annotations
 from ..errors import InvalidInput
 from ._base import PairSum
 from .dense import Dense
+from .nufft import NUFFT
 from .random_batch import RandomBatch
 from .reference import Numpy
 
 __all__ = ["as_pairsum"]
 
 #: Names accepted for ``pairsum=`` (and the older ``engine=``).
-ALIASES = ("fast", "dense", "numpy", "random_batch")
+ALIASES = ("fast", "dense", "numpy", "random_batch", "nufft")
+
+#: Names of backends other than the dense one, and what they build (default options).
+_OTHERS = {"numpy": Numpy, "random_batch": RandomBatch, "nufft": NUFFT}
 
 
 def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = None,
@@ -20,13 +24,14 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
 
     Parameters
     ----------
-    pairsum : PairSum or {"fast", "dense", "numpy", "random_batch"}, optional
+    pairsum : PairSum or {"fast", "dense", "numpy", "random_batch", "nufft"}, optional
         A backend object (anything with ``plan`` and ``evaluate``, see
         :class:`~kinred.pairsum.PairSum`), or a name: ``"fast"``/``"dense"`` for
         :class:`~kinred.pairsum.Dense` (the default), ``"numpy"`` for the twin
         :class:`~kinred.pairsum.Numpy`, ``"random_batch"`` for
-        :class:`~kinred.pairsum.RandomBatch` with ``p = 2`` (other ``p``: pass the object).
-    engine : {"fast", "dense", "numpy", "random_batch"}, optional
+        :class:`~kinred.pairsum.RandomBatch` with ``p = 2``, ``"nufft"`` for
+        :class:`~kinred.pairsum.NUFFT` with ``tol = 1e-6`` (other options: pass the object).
+    engine : {"fast", "dense", "numpy", "random_batch", "nufft"}, optional
         The older name of ``pairsum`` (strings only); give one of the two.
     block, precision : optional
         Options of the default backend, ``Dense(block=..., precision=...)``; only with
@@ -46,8 +51,8 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
     --------
     >>> as_pairsum(), as_pairsum("numpy"), as_pairsum(engine="fast", precision="mixed")
     (Dense(), Numpy(), Dense(precision='mixed'))
-    >>> as_pairsum("random_batch")
-    RandomBatch(p=2)
+    >>> as_pairsum("random_batch"), as_pairsum("nufft")
+    (RandomBatch(p=2), NUFFT(tol=1e-06))
     """
     if engine is not None:
         if pairsum is not None:
@@ -62,7 +67,7 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
         if pairsum not in ALIASES:
             raise InvalidInput(f"pairsum must be a PairSum backend or one of {ALIASES}, "
                                f"got {pairsum!r}")
-        if pairsum in ("fast", "dense"):
+        if pairsum not in _OTHERS:
             return Dense(block=block, precision="double" if precision is None else precision)
     elif not isinstance(pairsum, PairSum):
         raise InvalidInput(f"pairsum must be a PairSum backend (an object with plan(scene, n, "
@@ -75,6 +80,4 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
                            f"pairsum={pairsum!r} set them on the backend itself (e.g. "
                            f"pairsum=Dense(block=..., precision=...)); got block={block!r}, "
                            f"precision={precision!r}")
-    if isinstance(pairsum, str):
-        return Numpy() if pairsum == "numpy" else RandomBatch()
-    return pairsum
+    return _OTHERS[pairsum]() if isinstance(pairsum, str) else pairsum

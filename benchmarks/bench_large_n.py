@@ -1,0 +1,197 @@
+"""Benchmark: pair sums at large N – sub-quadratic backends against the dense engine.
+
+One section per backend, each a function ``section_<name>(args)`` registered in
+:data:`SECTIONS` (run them all, or some with ``--only``); every ratio and error of a section is
+measured in one process run.
+
+* ``nufft`` – :class:`kinred.pairsum.NUFFT` (fast summation by finufft), Cucker–Smale
+  alignment ``g(s) = 0.8 (1 + s²)^(−1.5)``, positions ``U[0, D]²``, velocities ``N(0, 1)``,
+  ``normalize="sum"``:
+
+  1. one right-hand side at N = 2·10⁴ (k = 2, D = 1 and D = 10): Dense vs NUFFT(tol = 1e-6),
+     the time ratio (target ≥ 20×) and the relative field error ``‖F − F_dense‖/‖F_dense‖``
+     (target ≤ 1e-6);
+  2. one right-hand side at N = 10⁶ (k = 2, D = 1; target ≤ 1.5 s on 2 cores) – skipped with
+     ``--quick`` (N = 10⁵ instead);
+  3. the error against the exact sum as a function of tol (1e-2 … 1e-10) on random clouds
+     (k = 1, 2, 3; Cucker–Smale and soft Morse; weighted; far from the origin): the table
+     behind the accuracy statement of ``NUFFT``'s docstring;
+  4. the peer: pykeops (the engine behind SiSyPHE) on the same dense 2-D sum at N = 10⁵, when
+     it is importable (it is not a kinred dependency).
+
+Run from the repository root::
+
+    python benchmarks/bench_large_n.py                 # everything, full sizes
+    python benchmarks/bench_large_n.py --quick         # reduced sizes (no N = 10⁶)
+    python benchmarks/bench_large_n.py --only nufft    # one section
+
+A new section: write ``section_<name>(args)`` printing its lines and add it to
+:data:`SECTIONS`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse,  # noqa: E402
+                             Scene, get_num_threads)
+from kinred.errors import TooLarge  # noqa: E402
+from kinred.pairsum import NUFFT, Dense  # noqa: E402
+
+CS = CuckerSmale(0.8, 1.5)
+
+
+def best_time(fn, repeat: int) -> tuple[float, object]:
+    """``(min wall time over repeat calls, last result)`` after one untimed warm-up call."""
+    out = fn()
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return min(times), out
+
+
+def rel(a, b) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def cloud(n, k, diameter, seed=0, shift=0.0):
+    rng = np.random.default_rng(seed)
+    return (rng.uniform(0.0, diameter, (n, k)) + shift, rng.normal(size=(n, k)),
+            rng.dirichlet(np.ones(n)))
+
+
+def rhs_fn(backend, x, v, effects=(Alignment(CS),), weights=None):
+    scene = Scene(list(effects), "sum", weights=weights, pairsum=backend)
+    return lambda: scene.rhs(x, v)[1], scene
+
+
+# ---------------------------------------------------------------------------- NUFFT
+def nufft_vs_dense(n, diameter, tol, repeat):
+    """One right-hand side, Dense and NUFFT(tol): times, ratio, field error, modes."""
+    x, v, _ = cloud(n, 2, diameter, seed=1)
+    dense, _ = rhs_fn(Dense(), x, v)
+    fast, scene = rhs_fn(NUFFT(tol), x, v)
+    t_dense, ref = best_time(dense, repeat)
+    t_fast, got = best_time(fast, repeat)
+    info = next(iter(scene._plans.values())).info()[0]
+    print(f"  N = {n}, k = 2, D = {diameter:g}: Dense {t_dense:.3f} s, NUFFT(tol={tol:g}) "
+          f"{1e3 * t_fast:.1f} ms -> {t_dense / t_fast:.1f}x (target >= 20x); relative field "
+          f"error {rel(got, ref):.2e} (target <= {tol:g}); modes {info['modes']}")
+
+
+def nufft_one_rhs(n, tol, repeat):
+    """One right-hand side of NUFFT alone at size ``n`` (first call = grid + plan, then the
+    per-step cost)."""
+    x, v, _ = cloud(n, 2, 1.0, seed=2)
+    fast, scene = rhs_fn(NUFFT(tol), x, v)
+    t = time.perf_counter()
+    fast()
+    first = time.perf_counter() - t
+    t_fast, _ = best_time(fast, repeat)
+    info = next(iter(scene._plans.values())).info()[0]
+    print(f"  N = {n}, k = 2, D = 1, NUFFT(tol={tol:g}): {t_fast:.3f} s per right-hand side "
+          f"(first call with grid and plan {first:.3f} s; modes {info['modes']}, finufft eps "
+          f"{info['eps']:g})")
+
+
+def nufft_error_table(n, tols):
+    """Relative field error / tol on random clouds: rows (k, kernel, diameter), columns tol."""
+    kernels = {"cs": [Alignment(CS)],
+               "morse": [AttractionRepulsion(Morse(Ca=1.0, la=2.0, Cr=1.5, lr=0.5, soft=0.3))]}
+    print(f"  relative field error / tol (and Fourier modes), N = {n}, weighted, 1e6 from "
+          "the origin:")
+    print("  " + f"{'k kernel D':<16}" + "".join(f"{'tol=%g' % t:>20}" for t in tols))
+    worst = {t: 0.0 for t in tols}
+    for k, diameters in ((1, (1e-6, 1.0, 10.0)), (2, (1e-6, 1.0, 10.0)), (3, (1e-6, 1.0))):
+        for name, eff in kernels.items():
+            for diameter in diameters:
+                x, v, w = cloud(n, k, diameter, seed=k, shift=1e6)
+                ref = Scene(eff, "sum", weights=w, pairsum="numpy").rhs(x, v)[1]
+                cells = []
+                for tol in tols:
+                    scene = Scene(eff, "sum", weights=w, pairsum=NUFFT(tol))
+                    try:
+                        err = rel(scene.rhs(x, v)[1], ref) / tol
+                    except TooLarge:
+                        cells.append(f"{'TooLarge':>20}")
+                        continue
+                    worst[tol] = max(worst[tol], err)
+                    modes = int(np.prod(next(iter(scene._plans.values())).info()[0]["modes"]))
+                    cells.append(f"{err:>11.2e} ({modes:>6d})")
+                print("  " + f"{f'{k} {name} {diameter:g}':<16}" + "".join(cells))
+    print("  worst error / tol: " + ", ".join(f"{t:g}: {e:.2f}" for t, e in worst.items()))
+
+
+def keops_peer(n, repeat):
+    """The same dense 2-D Cucker–Smale sum by pykeops (a LazyTensor reduction, compiled on
+    first use and warmed up on a small cloud; timed once: it is O(N²)), if importable."""
+    try:
+        from pykeops.numpy import LazyTensor
+    except Exception as exc:   # not a kinred dependency
+        print(f"  pykeops: not importable here ({type(exc).__name__}: {exc}); skipped")
+        return
+
+    def keops(x, v):
+        xi, xj = LazyTensor(x[:, None, :]), LazyTensor(x[None, :, :])
+        vj = LazyTensor(np.hstack([v, np.ones((len(x), 1))])[None, :, :])
+        # 0.8 (1 + s²)^(−3/2); measured faster than rsqrt(·)**3 in pykeops 2.3 on CPU
+        g = 0.8 * (1.0 + ((xi - xj) ** 2).sum(-1)) ** (-1.5)
+        A = (g * vj).sum(axis=1)
+        return A[:, :2] - A[:, 2:] * v
+
+    t = time.perf_counter()
+    keops(*cloud(1000, 2, 1.0, seed=4)[:2])
+    t_compile = time.perf_counter() - t
+    x, v, _ = cloud(n, 2, 1.0, seed=3)
+    t = time.perf_counter()
+    got = keops(x, v)
+    t_k = time.perf_counter() - t
+    t_f, ref = best_time(rhs_fn(NUFFT(1e-6), x, v)[0], repeat)
+    print(f"  pykeops dense sum, N = {n}, k = 2: {t_k:.3f} s per right-hand side (first use "
+          f"incl. compilation {t_compile:.1f} s; NUFFT 1e-6: {t_f:.3f} s); relative "
+          f"difference {rel(got, ref):.1e}")
+
+
+def section_nufft(args):
+    print(f"NUFFT fast summation (finufft), {get_num_threads()} engine threads")
+    repeat = 1 if args.quick else args.repeat
+    for diameter in (1.0, 10.0):
+        nufft_vs_dense(20_000, diameter, 1e-6, repeat)
+    if args.quick:
+        nufft_one_rhs(100_000, 1e-6, repeat)
+        print("  N = 10^6: skipped with --quick")
+    else:
+        nufft_one_rhs(1_000_000, 1e-6, repeat)
+    nufft_error_table(500 if args.quick else 2000, (1e-2, 1e-4, 1e-6, 1e-8, 1e-10))
+    keops_peer(20_000 if args.quick else 100_000, repeat)
+
+
+#: The sections, in the order they run.
+SECTIONS = {"nufft": section_nufft}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="reduced sizes (no N = 10^6)")
+    ap.add_argument("--only", nargs="+", choices=sorted(SECTIONS), help="sections to run")
+    ap.add_argument("--repeat", type=int, default=3, help="timed repeats (minimum reported)")
+    args = ap.parse_args(argv)
+    for name in args.only or list(SECTIONS):
+        t = time.perf_counter()
+        SECTIONS[name](args)
+        print(f"[{name}: {time.perf_counter() - t:.1f} s]\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
