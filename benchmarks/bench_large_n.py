@@ -177,7 +177,15 @@ def section_nufft(args):
 
 
 #: The sections, in the order they run.
-SECTIONS = {"nufft": section_nufft}
+def section_random_batch(args):
+    """RandomBatch: one step at N = 10⁶ (d = 8) and N = 10⁵ (d = 200), and the error law in
+    h/(p − 1) at N = 10⁴ (see ``_bench_large_n_rbm.py``)."""
+    from _bench_large_n_rbm import section_random_batch as run
+
+    run(quick=args.quick)
+
+
+SECTIONS = {"nufft": section_nufft, "random_batch": section_random_batch}
 
 
 def main(argv=None) -> int:
