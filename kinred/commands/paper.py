@@ -1,6 +1,8 @@
 """``kinred paper STUDY``: reproduce the paper's numerical experiments.
 
 * ``kinred paper table1`` -- Table 1 and Figures 1-3 (§3.4.1, flocking from projections).
+* ``kinred paper calibrate`` -- which coupling convention (G, initial data) matches the most
+  of Table 1's cells (docs/dynamics.md, "Calibrating G").
 * ``kinred paper fig4`` -- Figure 4 (§3.4.2, projection and l1-recovery errors over time).
 * ``kinred paper strategies`` -- the three recovery strategies of §3.3.1 at equal work.
 """
@@ -12,7 +14,7 @@ import sys
 from pathlib import Path
 
 NAME = "paper"
-HELP = "reproduce the paper's experiments (table1, fig4, strategies)"
+HELP = "reproduce the paper's experiments (table1, calibrate, fig4, strategies)"
 
 
 def _add_common(p: argparse.ArgumentParser, default_out: str) -> None:
@@ -36,6 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     t1.add_argument("--precision", choices=("mixed", "double"), default=None,
                     help="pair sums in float32 with float64 state (mixed, the default: about "
                          "half the time, same verdicts) or everything in float64 (double)")
+    ca = sub.add_parser("calibrate", help="calibrate Table 1's coupling G against the paper's cells")
+    _add_common(ca, "kinred-results/calibrate")
+    ca.add_argument("--projections", type=int, default=None,
+                    help="projections per (beta, k) and candidate (default 3; quick 2)")
     f4 = sub.add_parser("fig4", help="Figure 4 of §3.4.2")
     f4.add_argument("--out", default="kinred-results/fig4", help="result folder (default: %(default)s)")
     f4.add_argument("--quick", action="store_true", help="reduced sizes (N = d = 100)")
@@ -47,6 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     if args.study == "table1":
         return _table1(args)
+    if args.study == "calibrate":
+        return _calibrate(args)
     if args.study == "fig4":
         return _fig4(args)
     if args.study == "strategies":
@@ -77,6 +85,30 @@ def _table1(args) -> int:
                               title="Table 1 (paper)"))
     print(f"\nwall time {res.wall_time:.1f} s; results in {Path(args.out).resolve()}"
           f" (table1.json, figures, report.html)", file=sys.stdout)
+    return 0
+
+
+def _calibrate(args) -> int:
+    from ..experiments import calibrate_table1 as cal
+
+    over = {}
+    if args.projections is not None:
+        over["n_projections"] = args.projections
+    if args.seed is not None:
+        over["seed"] = args.seed
+    cfg = cal.CalibrationConfig.quick(**over) if args.quick else cal.CalibrationConfig(**over)
+    n_cand = len(cal.candidates(cfg))
+    est = cal.estimate_seconds(cfg, args.workers)
+    print(f"Table 1 calibration: {n_cand} candidates x {len(cfg.betas)} betas x (1 + "
+          f"{len(cfg.ks)} k x {cfg.n_projections} projections) simulations at N={cfg.N}; "
+          f"estimated wall time {est / 60:.0f} min ({est:.0f} s)"
+          + ("; --quick: reduced sizes, its numbers are not the paper's" if args.quick else ""),
+          flush=True)
+    res = cal.run(cfg, out_dir=args.out, executor=args.executor, workers=args.workers,
+                  scheduler=args.scheduler, resume=args.resume, progress=not args.no_progress)
+    print(res.to_text())
+    print(f"wall time {res.wall_time:.1f} s; results in {Path(args.out).resolve()}"
+          f" (calibration.json, calibration.txt, calibration.png)")
     return 0
 
 

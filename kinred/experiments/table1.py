@@ -43,7 +43,17 @@ import numpy as np
 from .._validate import as_choice, as_float, as_int
 from ..errors import InvalidInput
 
-__all__ = ["Table1Config", "Table1Result", "run", "member", "PAPER_TABLE1", "format_table"]
+__all__ = ["Table1Config", "Table1Result", "run", "member", "PAPER_TABLE1", "format_table",
+           "DEFAULT_COUPLING", "PAPER_N", "mean_field_strength", "coupling_G", "member_index"]
+
+#: The paper's number of agents (§3.4.1); ``G`` in :data:`DEFAULT_COUPLING` is for this ``N``.
+PAPER_N = 1000
+
+#: The study's coupling convention (the paper does not state ``G``): the scene's ``normalize``,
+#: ``G`` for ``N = PAPER_N`` agents, and the seed of the initial data. Chosen by ``kinred paper
+#: calibrate`` (:mod:`kinred.experiments.calibrate_table1`, docs/dynamics.md "Calibrating G");
+#: switching the study's convention is this one line (the docs quote it and must follow).
+DEFAULT_COUPLING = ("sum", 0.8, 0)
 
 #: Table 1 of the paper: {beta: {dim: (pos, neg, n/a)}}.
 PAPER_TABLE1 = {
@@ -67,12 +77,12 @@ class Table1Config:
     n_projections: int = 20
     steps: int = 1500
     dt: float = 0.02
-    G: float = 0.8
-    normalize: str = "sum"
+    G: float = DEFAULT_COUPLING[1]
+    normalize: str = DEFAULT_COUPLING[0]
     precision: str = "mixed"
     kind: str = "gaussian"
     seed: int = 20120101
-    data_seed: int = 0
+    data_seed: int = DEFAULT_COUPLING[2]
     record_every: int = 10
     yes_below: float = 1e-10
     no_above: float = 1e-3
@@ -103,9 +113,13 @@ class Table1Config:
     def quick(cls, **overrides) -> "Table1Config":
         """A reduced version (N = 200, 5 projections per k) that runs in about a minute.
 
-        G is scaled to keep N·G (the mean-field coupling strength) of the full setting.
+        G keeps the mean-field coupling strength of the full setting (:func:`coupling_G`:
+        N·G with the plain sum, G itself with ``normalize="mean"``).
         """
-        base = dict(N=200, n_projections=5, ks=(100, 25, 10, 2), G=0.8 * 1000 / 200,
+        normalize = overrides.get("normalize", DEFAULT_COUPLING[0])
+        strength = mean_field_strength(DEFAULT_COUPLING[0], DEFAULT_COUPLING[1], PAPER_N)
+        base = dict(N=200, n_projections=5, ks=(100, 25, 10, 2),
+                    G=coupling_G(normalize, strength, 200),
                     record_every=50,
                     figure_ks={1.5: (100, 10), 1.62: (100, 25), 1.7: (100, 10)})
         base.update(overrides)
@@ -117,6 +131,39 @@ class Table1Config:
         out["ks"] = list(self.ks)
         out["figure_ks"] = {str(b): list(v) for b, v in self.figure_ks.items()}
         return out
+
+
+def mean_field_strength(normalize: str, G: float, N: int) -> float:
+    """The mean-field coupling strength ``K`` of ``G`` under ``normalize`` with ``N`` agents.
+
+    Agent ``i`` feels ``Σⱼ cⱼ g(‖xᵢ − xⱼ‖)(vⱼ − vᵢ)`` (eq. (2.13)) with ``cⱼ = 1`` (``"sum"``)
+    or ``1/N`` (``"mean"``), so ``"sum"`` with ``G`` is ``"mean"`` with ``K = N·G``: the same
+    system in exact arithmetic. ``K`` is what stays fixed when ``N`` changes.
+
+    Examples
+    --------
+    >>> mean_field_strength("sum", 0.8, 1000), mean_field_strength("mean", 800.0, 1000)
+    (800.0, 800.0)
+    """
+    as_choice(normalize, "normalize", ("sum", "mean"))
+    G = as_float(G, "G", low=0.0, low_open=True)
+    N = as_int(N, "N", low=1)
+    return G * N if normalize == "sum" else G
+
+
+def coupling_G(normalize: str, strength: float, N: int) -> float:
+    """``G`` giving the mean-field strength ``strength`` under ``normalize`` with ``N`` agents
+    (the inverse of :func:`mean_field_strength`).
+
+    Examples
+    --------
+    >>> coupling_G("sum", 800.0, 1000), coupling_G("sum", 800.0, 200), coupling_G("mean", 800.0, 200)
+    (0.8, 4.0, 800.0)
+    """
+    as_choice(normalize, "normalize", ("sum", "mean"))
+    K = as_float(strength, "strength", low=0.0, low_open=True)
+    N = as_int(N, "N", low=1)
+    return K / N if normalize == "sum" else K
 
 
 def initial_data(N: int, d: int, data_seed: int):
@@ -196,6 +243,24 @@ def _members(cfg: Table1Config) -> list[dict]:
             for r in range(cfg.n_projections):
                 out.append(dict(common, beta=float(beta), k=int(k), realization=r))
     return out
+
+
+def member_index(cfg: Table1Config, beta: float, k: int, realization: int) -> int:
+    """Index of member ``(beta, k, realization)`` in :func:`run`'s member list (``k = 0``: the
+    original system, realization 0); that member projects with
+    ``kinred._rng.member_seed(cfg.seed, index)``.
+
+    Raises
+    ------
+    InvalidInput
+        If the study has no such member.
+    """
+    want = (as_float(beta, "beta"), as_int(k, "k", low=0), as_int(realization, "realization", low=0))
+    for i, m in enumerate(_members(cfg)):
+        if (m["beta"], m["k"], m["realization"]) == want:
+            return i
+    raise InvalidInput(f"(beta, k, realization) must be a member of the study (betas {list(cfg.betas)}, "
+                       f"ks {[0, *cfg.ks]}, realizations < {cfg.n_projections}), got {want}")
 
 
 def run(cfg: Table1Config | None = None, *, out_dir=None, executor: str = "processes",
