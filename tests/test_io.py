@@ -350,3 +350,50 @@ def test_stage_store_validation(tmp_path):
     with pytest.raises(InvalidInput, match="name must be a non-empty str"):
         StageStore(None, "d").get_or_compute("", lambda: {})
     assert not any(tmp_path.iterdir())                   # nothing written by refused calls
+
+
+# ----------------------------------------------------------------------------------------------
+# One store, one error: ensembles, kinred run and the paper studies
+# ----------------------------------------------------------------------------------------------
+def _member(params, seed):
+    return {"x": np.random.default_rng(seed).random(2)}
+
+
+def test_every_store_refuses_the_same_way(tmp_path):
+    from kinred.ensemble import run_ensemble
+    from kinred.experiments import kinetic_run, table1
+    from kinred.scenefile import SMALL_SCENE, config_from_dict
+
+    def ensemble(path, seed, resume=False):
+        run_ensemble(_member, [{"i": 0}], master_seed=seed, store=path, resume=resume,
+                     progress=False)
+
+    def kinetic(path, seed, resume=False):
+        cfg = config_from_dict({**SMALL_SCENE, "projection": {"k": [1], "seed": seed}})
+        kinetic_run.run(cfg, out_dir=path, resume=resume, progress=False)
+
+    def paper(path, seed, resume=False):
+        cfg = table1.Table1Config.quick(N=8, d=4, n_projections=1, steps=10, record_every=10,
+                                        ks=(2,), betas=(1.5,), seed=seed)
+        table1.run(cfg, out_dir=path, executor="serial", resume=resume, progress=False)
+
+    for run, sub, name in ((ensemble, "", "ensemble store"), (kinetic, "stages", "stage store"),
+                           (paper, "store", "ensemble store")):
+        out = tmp_path / run.__name__
+        run(out, 1)
+        store = out / sub if sub else out
+        with pytest.raises(StoreMismatch) as ei:
+            run(out, 1)
+        assert ei.value.reason == "resume" and ei.value.path == str(store)
+        assert str(ei.value) == (f"{name} {store} already holds a run; continue it with "
+                                 "resume=True (--resume on the command line) or choose another "
+                                 "folder")
+        with pytest.raises(StoreMismatch) as ei:
+            run(out, 2, resume=True)
+        assert ei.value.reason == "different" and ei.value.path == str(store)
+        assert re.fullmatch(rf"{re.escape(name)} {re.escape(str(store))} holds a run of a "
+                            r"different configuration \(config hash [0-9a-f]{12}… != "
+                            r"[0-9a-f]{12}… of this run; differs: [^)]*seed[^)]*\); resume it "
+                            r"with the same configuration or choose another folder",
+                            str(ei.value)), str(ei.value)
+        run(out, 1, resume=True)
