@@ -750,7 +750,7 @@ class StageStore:
         ``load(path)`` reads the file (default: :func:`read_npz`); a
         :class:`~kinred.errors.DamagedFile` it raises becomes a
         :class:`~kinred.errors.KinredWarning` ``"<path>: damaged ...; recomputing <label>"``
-        (``label`` default ``"the <item>"``) and ``None``.
+        and ``None``, with ``label`` by default ``"the <item>"``.
         """
         path = self.path(name)
         if path is None or not path.is_file():

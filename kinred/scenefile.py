@@ -115,6 +115,7 @@ class Key:
                                f"{self.name!r}")
 
     def valid_choices(self) -> tuple | None:
+        """The valid values now (a registry's current names), or None."""
         return self.choices() if callable(self.choices) else self.choices
 
     def range_text(self) -> str:
@@ -127,7 +128,8 @@ class Key:
         return lo or hi or ""
 
     def check(self, value, source: str, where: str):
-        """``value`` typed (numbers as float), or :class:`ConfigError` naming ``where``."""
+        """``value`` typed (numbers as float), or :class:`~kinred.errors.ConfigError` naming
+        ``where``."""
         ok, tname = _TYPES[self.type]
         if not ok(value):
             raise ConfigError(f"{source}: {where}: must be {tname}, got {_short(value)}")
