@@ -641,7 +641,10 @@ class Config:
             except InvalidInput as exc:
                 raise ConfigError(f"{self.source}: initial: {exc}") from None
         if self.lift_to is not None:
-            mu = lift(mu, self.lift_to, seed=self.lift_seed)
+            try:
+                mu = lift(mu, self.lift_to, seed=self.lift_seed)
+            except InvalidInput as exc:
+                raise ConfigError(f"{self.source}: initial.lift_to: {exc}") from None
         if mu.dim != 2 * self.d:
             raise ConfigError(f"{self.source}: dynamics.d: is {self.d} but the initial measure "
                               f"lives on R^{mu.dim // 2} (positions) after lifting")

@@ -345,6 +345,15 @@ def test_every_key_is_validated(data, needle):
     assert re.match("s\\.toml: " + needle + "$", msg), msg
 
 
+def test_lift_that_cannot_embed_is_a_config_error():
+    # was a raw InvalidInput "d must be >= 5, got 3" naming no file or key
+    data = _with("initial", lift_to=3)
+    for part in ("positions", "velocities"):
+        data["initial"][part]["coordinate"][0]["repeat"] = 5
+    with pytest.raises(ConfigError, match=r"^s\.toml: initial\.lift_to: d must be >= 5, got 3$"):
+        config_from_dict(data, source="s.toml").initial_measure()
+
+
 def test_smoke_values_are_named_as_smoke_keys():
     data = _with("smoke", t_final=1.05, k=[1])
     with pytest.raises(ConfigError, match=r"^s\.toml: smoke\.t_final: must be a multiple of dt=0\.1, "
