@@ -731,7 +731,7 @@ def _read_tables(data: dict, source: str, smoke: bool):
     return top, tables, origin
 
 
-def _check_quantize(qu: dict, source: str, at) -> None:
+def _check_quantize(qu: dict, source: str) -> None:
     if ("eps" in qu) == ("atoms" in qu):
         raise ConfigError(f"{source}: quantize.eps: give exactly one of quantize.eps and "
                           "quantize.atoms")
@@ -819,7 +819,7 @@ def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False
     d = dyn["d"]
     effects = _read_effects(dyn["effect"], d, source)
     pairsum = _read_pairsum(dyn.get("pairsum"), dyn["precision"], source)
-    _check_quantize(qu, source, at)
+    _check_quantize(qu, source)
     ks = _check_ks(pr["k"], d, source, at)
     save_every = _check_time_grid(it, source, at)
     if not out["yes_below"] <= out["no_above"]:
