@@ -30,8 +30,9 @@ in every executor (the serial one included), runs the dynamics engine with one t
 (:func:`kinred.dynamics.set_num_threads`): the engine's round-off depends on its number of
 threads, and the results must not depend on the executor.
 
-**Results store.** With ``store=path`` each finished member is written at once, atomically
-(:mod:`kinred.io`), by the calling process (workers need no shared file system)::
+**Results store.** With ``store=path`` each finished member is written at once, atomically,
+by the calling process (workers need no shared file system). The store is a
+:class:`kinred.io.StageStore` whose stages are the members::
 
     path/run.json              format, master seed, members, fn name, config, config hash
     path/members/000123.npz    one archive per finished member (written last-to-first: a
@@ -40,13 +41,15 @@ threads, and the results must not depend on the executor.
 
 Each member archive holds the member's arrays and a ``__meta__`` entry (JSON: index, params,
 wall time, scalar and string results), so one atomic rename commits a member.
-``resume=True`` loads the members already present and computes only the others; it refuses
-(:class:`StoreMismatch`) if the stored ``run.json`` has a different config hash. A killed run
-(even ``SIGKILL``) loses at most the members that were in flight. A damaged member file
-(truncated, not an ``.npz`` archive, missing entries) is reported by a
-:class:`~kinred.errors.KinredWarning` naming it and recomputed; a damaged ``run.json`` is
-refused (:class:`~kinred.errors.DamagedFile`): it is what ties the member files to the run, so
-the message says to delete the store or to choose a new directory.
+``resume=True`` loads the members already present and computes only the others. The store's
+rules are those of every :class:`~kinred.io.StageStore`: a store holding a run is refused
+without ``resume=True``, one holding a run with a different config hash always
+(:class:`~kinred.errors.StoreMismatch`); a killed run (even ``SIGKILL``) loses at most the
+members that were in flight; a damaged member file (truncated, not an ``.npz`` archive,
+missing entries) is reported by a :class:`~kinred.errors.KinredWarning` naming it and
+recomputed; a damaged ``run.json`` is refused (:class:`~kinred.errors.DamagedFile`): it is
+what ties the member files to the run, so the message says to delete the store or to choose
+a new directory.
 
 **Functions must be picklable** for ``"processes"`` and ``"dask"``: define ``fn`` at the top
 level of an importable module (or of the ``__main__`` script, guarded by
@@ -77,7 +80,6 @@ import pickle
 import sys
 import time
 import traceback
-import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,8 +90,8 @@ import numpy as np
 from ._rng import member_seed
 from ._validate import as_choice, as_int
 from . import _parallel
-from .errors import DamagedFile, InvalidInput, KinredError, KinredWarning
-from .io import ResultFolder, atomic_write_npz, read_npz, to_jsonable
+from .errors import DamagedFile, InvalidInput, KinredError, StoreMismatch
+from .io import StageStore, atomic_write_npz, read_npz, to_jsonable
 
 __all__ = [
     "THREAD_ENV",
@@ -142,10 +144,6 @@ class MemberFailed(KinredError, RuntimeError):
 
 def _rebuild_member_failed(message, index, params, tb):
     return MemberFailed(message, index=index, params=params, remote_traceback=tb)
-
-
-class StoreMismatch(InvalidInput):
-    """A results store holds a different run than the one asked for (config hash differs)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -326,13 +324,15 @@ def _thread_env():
 
 
 # ----------------------------------------------------------------------------------------------
-# Store
+# Store: a kinred.io.StageStore whose stages are the members
 # ----------------------------------------------------------------------------------------------
 def _member_name(index: int) -> str:
-    return f"members/{index:06d}.npz"
+    return f"members/{index:06d}"
 
 
-def _write_member(folder: ResultFolder, index: int, params: dict, out: dict, wall: float) -> None:
+def _write_member(path: Path, member: tuple) -> None:
+    """Write ``(index, params, out, wall)`` as one archive (arrays + a ``__meta__`` JSON entry)."""
+    index, params, out, wall = member
     arrays = {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
     scalars = {k: v for k, v in out.items() if not isinstance(v, np.ndarray)}
     meta = {
@@ -343,7 +343,7 @@ def _write_member(folder: ResultFolder, index: int, params: dict, out: dict, wal
         "order": list(out),
     }
     arrays[_META] = np.array(json.dumps(meta, allow_nan=True))
-    atomic_write_npz(folder / _member_name(index), arrays)
+    atomic_write_npz(path, arrays)
 
 
 def _decode_member(path: Path):
@@ -365,70 +365,43 @@ def _decode_member(path: Path):
     return data, meta
 
 
-def _read_member(folder: ResultFolder, index: int, params: dict):
-    """``(out, wall)`` of a stored member; ``None`` if absent or damaged (a
-    :class:`~kinred.errors.KinredWarning` names the damaged file; the member is recomputed)."""
-    path = folder / _member_name(index)
-    if not path.is_file():
-        return None
-    try:
+def _member_loader(index: int, params: dict):
+    """Loader of member ``index``'s file for :meth:`StageStore.load`: ``(out, wall)``."""
+
+    def load(path: Path):
         data, meta = _decode_member(path)
-    except DamagedFile as exc:
-        warnings.warn(f"{exc}; recomputing member {index}", KinredWarning, stacklevel=3)
-        return None
-    if meta.get("index") != index or meta.get("params") != params:
-        raise StoreMismatch(
-            f"store member file {path} holds member {meta.get('index')} with params "
-            f"{meta.get('params')}, expected member {index} with params {params}"
-        )
-    out = {}
-    for key in meta["order"]:
-        out[key] = meta["scalars"][key] if key in meta["scalars"] else data[key]
-    return out, float(meta["wall_time"])
-
-
-def _stored_run(folder: ResultFolder) -> dict:
-    """The stored ``run.json``; a damaged one is refused with what to do about it."""
-    path = folder / "run.json"
-    try:
-        stored = folder.read_json("run.json", what="store description")
-        if not isinstance(stored, dict) or not isinstance(stored.get("config_hash"), str):
-            raise DamagedFile(f"{path}: damaged store description: no config hash", path=str(path))
-    except DamagedFile as exc:
-        raise DamagedFile(f"{exc}; it ties the member files to a run, so they cannot be resumed: "
-                          f"delete the store {str(folder.path)!r} and run again, or choose a new "
-                          "directory", path=str(path)) from None
-    return stored
-
-
-def _open_store(store, *, resume: bool, run_info: dict) -> ResultFolder:
-    path = Path(store)
-    run_json = path / "run.json"
-    if run_json.is_file():
-        folder = ResultFolder(path)
-        if not resume:
+        if meta.get("index") != index or meta.get("params") != params:
             raise StoreMismatch(
-                f"store {str(path)!r} already holds a run; pass resume=True (--resume on the "
-                "command line) to continue it or choose a new directory"
-            )
-        stored = _stored_run(folder)
-        if stored.get("config_hash") != run_info["config_hash"]:
-            raise StoreMismatch(
-                f"store {str(path)!r} holds a different run (config hash "
-                f"{stored.get('config_hash', '?')[:12]}… != {run_info['config_hash'][:12]}… of this run: "
-                "master seed, members, function name or config differ); resume it with the same "
-                "configuration or choose a new directory"
-            )
-        folder.clean_temporary()
-        return folder
-    if path.exists() and (not path.is_dir() or any(path.iterdir())):
-        raise StoreMismatch(
-            f"store {str(path)!r} exists and is not an ensemble store (no run.json); "
-            "choose a new or empty directory"
-        )
-    folder = ResultFolder(path)
-    folder.write_json("run.json", run_info)
-    return folder
+                f"store member file {path} holds member {meta.get('index')} with params "
+                f"{meta.get('params')}, expected member {index} with params {params}",
+                path=str(path), reason="member")
+        out = {key: meta["scalars"][key] if key in meta["scalars"] else data[key]
+               for key in meta["order"]}
+        return out, float(meta["wall_time"])
+
+    return load
+
+
+def _open_store(store, *, resume: bool, chash: str, run_info: dict) -> StageStore:
+    """The run's :class:`~kinred.io.StageStore` (``run.json`` + ``members/``; no folder: None)."""
+    return StageStore(store, chash, resume=resume, describe=run_info, index="run.json",
+                      digest_key="config_hash", store_name="ensemble store", item="member")
+
+
+def _load_members(stages: StageStore, members: list[dict]):
+    """``(results, walls, loaded)`` with the members already in the store filled in."""
+    n = len(members)
+    results: list[dict | None] = [None] * n
+    walls = np.full(n, np.nan)
+    loaded = np.zeros(n, dtype=bool)
+    if stages.folder is not None:
+        for i, params in enumerate(members):
+            got = stages.load(_member_name(i), load=_member_loader(i, params),
+                              label=f"member {i}")
+            if got is not None:
+                results[i], walls[i] = got
+                loaded[i] = True
+    return results, walls, loaded
 
 
 # ----------------------------------------------------------------------------------------------
@@ -583,6 +556,53 @@ def _iter_dask(fn, todo, members, master_seed, workers, scheduler):
             own_cluster.close()
 
 
+def _stream(fn, todo, members, master_seed, executor, n_workers, scheduler):
+    """The executor's generator of ``(status, index, payload, extra)`` for the members ``todo``."""
+    if executor == "serial":
+        return _iter_serial(fn, todo, members, master_seed)
+    if executor == "processes":
+        return _iter_processes(fn, todo, members, master_seed, n_workers)
+    return _iter_dask(fn, todo, members, master_seed, n_workers, scheduler)
+
+
+def _n_workers(executor: str, workers: int | None, n_todo: int) -> int:
+    """Workers used: 1 for serial; else ``workers`` (default the cores), at most ``n_todo``."""
+    if executor == "serial":
+        return 1
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    return max(1, min(n, n_todo)) if n_todo else n
+
+
+def _check_run(fn, members, master_seed, executor, workers, scheduler, store, resume):
+    """Validated ``(members, master_seed, executor, workers)`` of a :func:`run_ensemble` call."""
+    if not callable(fn):
+        raise InvalidInput(f"fn must be callable, got {fn!r}")
+    members = _check_members(members)
+    master_seed = as_int(master_seed, "master_seed", low=0)
+    executor = as_choice(executor, "executor", EXECUTORS)
+    if workers is not None:
+        workers = as_int(workers, "workers", low=1)
+    if scheduler is not None and executor != "dask":
+        raise InvalidInput(f"scheduler is only used with executor='dask', got executor={executor!r}")
+    if scheduler is not None and not isinstance(scheduler, str):
+        dist = _import_distributed()
+        if not isinstance(scheduler, dist.Client):
+            raise InvalidInput(f"scheduler must be an address str or a distributed.Client, got {scheduler!r}")
+    if resume and store is None:
+        raise InvalidInput("resume=True needs a store directory, got store=None")
+    if store is not None and (isinstance(store, bytes) or not isinstance(store, (str, os.PathLike))):
+        raise InvalidInput(f"store must be a directory path (str or os.PathLike), got {store!r}")
+    if executor != "serial":
+        try:
+            pickle.dumps(fn)
+        except Exception as exc:
+            raise InvalidInput(
+                f"fn must be picklable for executor={executor!r} (a top-level function of an "
+                f"importable module), got {fn!r}: {exc}"
+            ) from None
+    return members, master_seed, executor, workers
+
+
 # ----------------------------------------------------------------------------------------------
 # Entry point
 # ----------------------------------------------------------------------------------------------
@@ -648,91 +668,36 @@ def run_ensemble(
     KinredError
         ``executor="dask"`` without Dask installed.
     """
-    if not callable(fn):
-        raise InvalidInput(f"fn must be callable, got {fn!r}")
-    members = _check_members(members)
-    master_seed = as_int(master_seed, "master_seed", low=0)
-    executor = as_choice(executor, "executor", EXECUTORS)
-    n = len(members)
-    if workers is not None:
-        workers = as_int(workers, "workers", low=1)
-    if scheduler is not None and executor != "dask":
-        raise InvalidInput(f"scheduler is only used with executor='dask', got executor={executor!r}")
-    if scheduler is not None and not isinstance(scheduler, str):
-        dist = _import_distributed()
-        if not isinstance(scheduler, dist.Client):
-            raise InvalidInput(f"scheduler must be an address str or a distributed.Client, got {scheduler!r}")
-    if resume and store is None:
-        raise InvalidInput("resume=True needs a store directory, got store=None")
-    if store is not None and (isinstance(store, bytes) or not isinstance(store, (str, os.PathLike))):
-        raise InvalidInput(f"store must be a directory path (str or os.PathLike), got {store!r}")
-    if executor != "serial":
-        try:
-            pickle.dumps(fn)
-        except Exception as exc:
-            raise InvalidInput(
-                f"fn must be picklable for executor={executor!r} (a top-level function of an "
-                f"importable module), got {fn!r}: {exc}"
-            ) from None
+    members, master_seed, executor, workers = _check_run(
+        fn, members, master_seed, executor, workers, scheduler, store, resume)
     config_json = _plain(config, "config") if config is not None else None
     chash = config_hash(master_seed, members, getattr(fn, "__qualname__", repr(fn)), config_json)
 
     t_start = time.perf_counter()
-    results: list[dict | None] = [None] * n
-    walls = np.full(n, np.nan)
-    loaded = np.zeros(n, dtype=bool)
-
-    folder = None
-    if store is not None:
-        run_info = {
-            "format": _FORMAT,
-            "master_seed": master_seed,
-            "n_members": n,
-            "fn": _fn_name(fn),
-            "config": config_json,
-            "config_hash": chash,
-            "members": members,
-        }
-        folder = _open_store(store, resume=resume, run_info=run_info)
-        if resume:
-            for i in range(n):
-                got = _read_member(folder, i, members[i])
-                if got is not None:
-                    results[i], walls[i] = got
-                    loaded[i] = True
-
+    n = len(members)
+    run_info = {"format": _FORMAT, "master_seed": master_seed, "n_members": n,
+                "fn": _fn_name(fn), "config": config_json, "members": members}
+    stages = _open_store(store, resume=resume, chash=chash, run_info=run_info)
+    results, walls, loaded = _load_members(stages, members)
     todo = [i for i in range(n) if not loaded[i]]
-    if executor == "serial":
-        n_workers = 1
-    else:
-        n_workers = workers if workers is not None else (os.cpu_count() or 1)
-        n_workers = max(1, min(n_workers, len(todo))) if todo else n_workers
-
+    n_workers = _n_workers(executor, workers, len(todo))
     if todo:
-        if executor == "serial":
-            stream = _iter_serial(fn, todo, members, master_seed)
-        elif executor == "processes":
-            stream = _iter_processes(fn, todo, members, master_seed, n_workers)
-        else:
-            stream = _iter_dask(fn, todo, members, master_seed, n_workers, scheduler)
+        stream = _stream(fn, todo, members, master_seed, executor, n_workers, scheduler)
         bar = _make_bar(n, int(loaded.sum()), progress)
         try:
             for status, i, payload, extra in stream:
                 if status == "error":
                     raise _failed(i, members[i], payload, extra)
-                if folder is not None:
-                    _write_member(folder, i, members[i], payload, extra)
+                stages.save(_member_name(i), (i, members[i], payload, extra), save=_write_member)
                 results[i], walls[i] = payload, extra
                 bar.update(1)
         finally:
             bar.close()
-            close = getattr(stream, "close", None)
-            if close is not None:
-                close()  # shut executors down (cancels pending members on error/interrupt)
+            stream.close()  # shut executors down (cancels pending members on error/interrupt)
 
     total = time.perf_counter() - t_start
-    if folder is not None:
-        folder.mark_complete({
+    if stages.folder is not None:
+        stages.folder.mark_complete({
             "config_hash": chash,
             "n_members": n,
             "n_loaded": int(loaded.sum()),

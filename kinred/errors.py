@@ -19,6 +19,7 @@ __all__ = [
     "TooLarge",
     "NotProjectable",
     "DamagedFile",
+    "StoreMismatch",
     "KinredWarning",
 ]
 
@@ -55,6 +56,34 @@ class DamagedFile(InvalidInput):
 
 def _rebuild_damaged(message, path):
     return DamagedFile(message, path=path)
+
+
+class StoreMismatch(InvalidInput):
+    """A result store (:class:`kinred.io.StageStore`: an ensemble's store, the stage files of
+    ``kinred run``, a paper study's store) cannot take this run.
+
+    Attributes
+    ----------
+    path : str
+        The store's folder.
+    reason : {"resume", "different", "foreign", "member"}
+        ``"resume"``: the folder holds a run and ``resume=True`` (``--resume``) was not given;
+        ``"different"``: it holds a run of a different configuration (digest differs);
+        ``"foreign"``: it holds other files and no store index; ``"member"``: a stored file
+        holds another item than its name says.
+    """
+
+    def __init__(self, message: str, *, path: str = "", reason: str = ""):
+        super().__init__(message)
+        self.path = path
+        self.reason = reason
+
+    def __reduce__(self):
+        return (_rebuild_mismatch, (str(self), self.path, self.reason))
+
+
+def _rebuild_mismatch(message, path, reason):
+    return StoreMismatch(message, path=path, reason=reason)
 
 
 class SimulationDiverged(KinredError, FloatingPointError):

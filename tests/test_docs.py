@@ -44,7 +44,7 @@ def _page_text(path: Path, *, prose: bool = False) -> str:
 
 API_MODULES = ["measures", "quantize", "distance", "projection", "dynamics", "pairsum",
                "integrate", "observables", "recovery", "ensemble", "kinetic", "certify", "io",
-               "report", "errors"]
+               "scenefile", "report", "errors"]
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of kinred.io: atomic writes and result folders."""
+"""Tests of kinred.io: atomic writes, result folders and the stage store."""
 
 from __future__ import annotations
 
@@ -9,9 +9,10 @@ import re
 import numpy as np
 import pytest
 
-from kinred.errors import ConfigError, DamagedFile, InvalidInput
+from kinred.errors import ConfigError, DamagedFile, InvalidInput, KinredWarning, StoreMismatch
 from kinred.io import (
     ResultFolder,
+    StageStore,
     atomic_write_bytes,
     atomic_write_json,
     atomic_write_npz,
@@ -214,3 +215,185 @@ def test_reading_damaged_npz(tmp_path):
     with pytest.raises(DamagedFile, match=r"a single \.npy array"):
         read_npz(tmp_path / "a.npy")
     assert np.array_equal(read_npz(good)["x"], np.arange(2000.0))
+
+
+def test_read_npz_required_keys(tmp_path):
+    p = atomic_write_npz(tmp_path / "s.npz", {"a": np.zeros(2)})
+    assert list(read_npz(p, keys=("a",))) == ["a"]
+    with pytest.raises(DamagedFile, match=r"s\.npz: damaged stage file: no array 'b'$") as ei:
+        read_npz(p, what="stage file", keys=("a", "b"))
+    assert ei.value.path == str(p)
+
+
+# ----------------------------------------------------------------------------------------------
+# StageStore
+# ----------------------------------------------------------------------------------------------
+def _counting(value):
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return value
+
+    return compute, calls
+
+
+def test_stage_store_computes_once_and_resumes(tmp_path):
+    store = StageStore(tmp_path / "st", "abc", describe={"config": {"n": 1}})
+    assert read_json(tmp_path / "st" / "config.json") == {"digest": "abc", "config": {"n": 1}}
+    compute, calls = _counting({"x": np.arange(3.0), "s": np.float64(0.5)})
+    first = store.get_or_compute("solve", compute)
+    assert calls == [1] and store.status == {"solve": "computed"}
+    assert _names(tmp_path / "st") == ["config.json", "solve.npz"]
+    again = StageStore(tmp_path / "st", "abc", resume=True, describe={"config": {"n": 1}})
+    got = again.get_or_compute("solve", compute)
+    assert calls == [1] and again.status == {"solve": "loaded"}
+    assert got["x"].tobytes() == first["x"].tobytes() and float(got["s"]) == 0.5
+    # nested names, custom formats
+    again.get_or_compute("members/000001", lambda: "text",
+                         save=lambda p, v: atomic_write_text(p, v), load=lambda p: read_text(p))
+    assert (tmp_path / "st" / "members" / "000001.npz").read_text() == "text"
+    assert StageStore(tmp_path / "st", "abc", resume=True).load(
+        "members/000001", load=lambda p: read_text(p)) == "text"
+    # no folder: every stage is computed, nothing is written
+    mem = StageStore(None, "abc")
+    mem.get_or_compute("solve", compute)
+    mem.get_or_compute("solve", compute)
+    assert calls == [1, 1, 1] and mem.folder is None and mem.path("solve") is None
+
+
+def test_stage_store_refusals(tmp_path):
+    path = tmp_path / "st"
+    StageStore(path, "a" * 64, describe={"config": {"dt": 0.1, "k": [1]}, "seed": 1})
+    with pytest.raises(StoreMismatch) as ei:
+        StageStore(path, "a" * 64)
+    assert ei.value.reason == "resume" and ei.value.path == str(path)
+    assert str(ei.value) == (f"stage store {path} already holds a run; continue it with "
+                             "resume=True (--resume on the command line) or choose another folder")
+    with pytest.raises(StoreMismatch) as ei:
+        StageStore(path, "b" * 64, resume=True, describe={"config": {"dt": 0.2, "k": [1]},
+                                                          "seed": 1})
+    assert ei.value.reason == "different"
+    assert str(ei.value) == (f"stage store {path} holds a run of a different configuration "
+                             f"(config hash {'a' * 12}… != {'b' * 12}… of this run; differs: "
+                             "config.dt); resume it with the same configuration or choose "
+                             "another folder")
+    # a folder holding other files and no index is not a store (stale stage files included)
+    StageStore(path, "a" * 64, resume=True).get_or_compute("solve", lambda: {"x": np.ones(1)})
+    (path / "config.json").unlink()
+    for resume in (False, True):
+        with pytest.raises(StoreMismatch, match=r"exists and is not a stage store \(no "
+                                                r"config\.json\); choose a new or empty "
+                                                r"directory") as ei:
+            StageStore(path, "a" * 64, resume=resume)
+        assert ei.value.reason == "foreign"
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(StoreMismatch, match="is not an ensemble store"):
+        StageStore(tmp_path / "afile", "a", store_name="ensemble store")
+    # an empty folder, or one holding only a killed writer's temporary file, is a new store
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / ".config.json.x1y2.tmp").write_bytes(b"half")
+    StageStore(empty, "d")
+    assert _names(empty) == ["config.json"]
+
+
+@pytest.mark.parametrize("content", [b"", b'{"digest": "ab', b"\xff", b"[1]", b'{"digest": 3}'])
+def test_stage_store_refuses_a_damaged_index(tmp_path, content):
+    path = tmp_path / "st"
+    StageStore(path, "d")
+    (path / "config.json").write_bytes(content)
+    with pytest.raises(DamagedFile) as ei:
+        StageStore(path, "d", resume=True)
+    msg = str(ei.value)
+    assert msg.startswith(f"{path / 'config.json'}: ") and ei.value.path == str(path / "config.json")
+    assert msg.endswith(f"; it ties the stage files to a run, so they cannot be resumed: delete "
+                        f"the store, i.e. delete the folder {path} and run again, or run into "
+                        "another output folder")
+
+
+def test_stage_store_recomputes_damaged_stages(tmp_path):
+    path = tmp_path / "st"
+    store = StageStore(path, "d")
+    for name in ("a", "b", "c"):
+        store.get_or_compute(name, lambda: {"x": np.ones(4)})
+    os.truncate(path / "a.npz", 10)
+    (path / "b.npz").write_bytes(b"")
+    again = StageStore(path, "d", resume=True)
+    with pytest.warns(KinredWarning) as rec:
+        a = again.get_or_compute("a", lambda: {"x": np.zeros(4)})
+        b = again.get_or_compute("b", lambda: {"x": np.zeros(4)}, label="member 7")
+        c = again.get_or_compute("c", lambda: {"x": np.zeros(4)},
+                                 load=lambda p: read_npz(p, what="stage file", keys=("y",)))
+    texts = [str(w.message) for w in rec]
+    assert len(texts) == 3
+    assert texts[0].startswith(f"{path / 'a.npz'}: damaged stage file: truncated or not an .npz")
+    assert texts[0].endswith("; recomputing the stage")
+    assert texts[1].endswith("; recomputing member 7")
+    assert texts[2] == f"{path / 'c.npz'}: damaged stage file: no array 'y'; recomputing the stage"
+    assert again.status == {"a": "computed", "b": "computed", "c": "computed"}
+    assert not a["x"].any() and not b["x"].any() and not c["x"].any()
+    assert not read_npz(path / "a.npz")["x"].any()              # rewritten
+
+
+def test_stage_store_validation(tmp_path):
+    for kwargs, needle in [
+        (dict(folder=b"x", digest="d"), "folder must be a directory path"),
+        (dict(folder=tmp_path, digest=""), "digest must be a non-empty str"),
+        (dict(folder=tmp_path, digest="d", resume="yes"), "resume must be True or False"),
+        (dict(folder=tmp_path, digest="d", describe=[1]), "describe must be a mapping"),
+        (dict(folder=tmp_path, digest="d", index=3), "index must be a non-empty str"),
+    ]:
+        folder = kwargs.pop("folder")
+        with pytest.raises(InvalidInput, match=needle):
+            StageStore(folder, **kwargs)
+    with pytest.raises(InvalidInput, match="name must be a non-empty str"):
+        StageStore(None, "d").get_or_compute("", lambda: {})
+    assert not any(tmp_path.iterdir())                   # nothing written by refused calls
+
+
+# ----------------------------------------------------------------------------------------------
+# One store, one error: ensembles, kinred run and the paper studies
+# ----------------------------------------------------------------------------------------------
+def _member(params, seed):
+    return {"x": np.random.default_rng(seed).random(2)}
+
+
+def test_every_store_refuses_the_same_way(tmp_path):
+    from kinred.ensemble import run_ensemble
+    from kinred.experiments import kinetic_run, table1
+    from kinred.scenefile import SMALL_SCENE, config_from_dict
+
+    def ensemble(path, seed, resume=False):
+        run_ensemble(_member, [{"i": 0}], master_seed=seed, store=path, resume=resume,
+                     progress=False)
+
+    def kinetic(path, seed, resume=False):
+        cfg = config_from_dict({**SMALL_SCENE, "projection": {"k": [1], "seed": seed}})
+        kinetic_run.run(cfg, out_dir=path, resume=resume, progress=False)
+
+    def paper(path, seed, resume=False):
+        cfg = table1.Table1Config.quick(N=8, d=4, n_projections=1, steps=10, record_every=10,
+                                        ks=(2,), betas=(1.5,), seed=seed)
+        table1.run(cfg, out_dir=path, executor="serial", resume=resume, progress=False)
+
+    for run, sub, name in ((ensemble, "", "ensemble store"), (kinetic, "stages", "stage store"),
+                           (paper, "store", "ensemble store")):
+        out = tmp_path / run.__name__
+        run(out, 1)
+        store = out / sub if sub else out
+        with pytest.raises(StoreMismatch) as ei:
+            run(out, 1)
+        assert ei.value.reason == "resume" and ei.value.path == str(store)
+        assert str(ei.value) == (f"{name} {store} already holds a run; continue it with "
+                                 "resume=True (--resume on the command line) or choose another "
+                                 "folder")
+        with pytest.raises(StoreMismatch) as ei:
+            run(out, 2, resume=True)
+        assert ei.value.reason == "different" and ei.value.path == str(store)
+        assert re.fullmatch(rf"{re.escape(name)} {re.escape(str(store))} holds a run of a "
+                            r"different configuration \(config hash [0-9a-f]{12}… != "
+                            r"[0-9a-f]{12}… of this run; differs: [^)]*seed[^)]*\); resume it "
+                            r"with the same configuration or choose another folder",
+                            str(ei.value)), str(ei.value)
+        run(out, 1, resume=True)

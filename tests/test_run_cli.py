@@ -1,10 +1,10 @@
 """``kinred run``: shipped scenes in smoke mode, malformed scene files, interrupt and resume."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -136,20 +136,41 @@ def test_config_errors_directly():
     assert kinetic_run.config_from_dict(kinetic_run.SMALL_SCENE).scene().precision == "double"
 
 
-def _cli_cmd(args):
-    if REGISTERED:
+def _cli_cmd(args, kill_after_stage=None):
+    """The command running ``kinred *args`` in a new interpreter; with ``kill_after_stage=n``
+    the process SIGKILLs itself right after the n-th stage file is written (the test's hook
+    wraps :meth:`kinred.io.StageStore.save`: a deterministic hard interruption)."""
+    if kill_after_stage is None and REGISTERED:
         return [sys.executable, "-m", "kinred", *args]
-    code = ("import sys, kinred.cli as c; c.COMMAND_MODULES += ('kinred.commands.run',); "
-            f"sys.exit(c.main({list(args)!r}))")
+    code = "import sys, kinred.cli as c\n"
+    if not REGISTERED:
+        code += "c.COMMAND_MODULES += ('kinred.commands.run',)\n"
+    if kill_after_stage is not None:
+        code += textwrap.dedent(f"""
+            import os, signal
+            from kinred.io import StageStore
+            _save, _count = StageStore.save, [0]
+            def save(self, *args, **kwargs):
+                _save(self, *args, **kwargs)
+                _count[0] += 1
+                if _count[0] >= {kill_after_stage}:
+                    os.kill(os.getpid(), signal.SIGKILL)
+            StageStore.save = save
+            """)
+    code += f"sys.exit(c.main({list(args)!r}))\n"
     return [sys.executable, "-c", code]
+
+
+def _arrays(path):
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files if not k.endswith("_time")}   # timings differ
 
 
 def test_interrupt_and_resume(tmp_path, main, capsys):
     scene = tmp_path / "s.toml"
     scene.write_text(BASE.replace("k = [1]", "k = [1, 2]").replace("atoms = 9", "atoms = 9\nreference_atoms = 16"))
     out = tmp_path / "out"
-    env = dict(os.environ, **{kinetic_run.STAGE_HOOK_ENV: "2:kill"})
-    p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(out)]), env=env,
+    p = subprocess.run(_cli_cmd(["run", str(scene), "--out", str(out)], kill_after_stage=2),
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == -signal.SIGKILL, p.stderr
     done = sorted(x.name for x in (out / "stages").iterdir())
@@ -168,10 +189,19 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
         assert (out / "stages" / n).stat().st_mtime_ns == m
         assert (out / "stages" / n).read_bytes() == content[n]
     validate_report_html((out / "report.html").read_text())
+    # the resumed run's numbers are those of an uninterrupted run, bit for bit
+    assert main(["run", str(scene), "--out", str(tmp_path / "clean")]) == 0
+    a, b = _arrays(tmp_path / "clean" / "results.npz"), _arrays(out / "results.npz")
+    assert a.keys() == b.keys() and len(a) > 40
+    for key in a:
+        assert a[key].tobytes() == b[key].tobytes(), key
     # a changed configuration is not resumed into the same folder
     scene.write_text(scene.read_text().replace("t_final = 0.5", "t_final = 0.6"))
+    capsys.readouterr()
     assert main(["run", str(scene), "--out", str(out), "--resume"]) == 2
-    assert "different configuration" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "different configuration" in err
+    assert "StoreMismatch" in err and "differs: config.t_final" in err
 
 
 def test_python_m_kinred_run_subprocess(tmp_path):
@@ -181,3 +211,20 @@ def test_python_m_kinred_run_subprocess(tmp_path):
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     assert "report:" in p.stdout and p.stderr == ""    # no progress bar when not a TTY
+
+
+def test_stage_files_without_their_index_are_not_trusted(tmp_path, main, capsys):
+    # stages/config.json deleted: the old loader wrote a new index for the changed scene and
+    # loaded the stale stage files (a T = 0.5 run reported for a T = 1.0 scene)
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    (out / "stages" / "config.json").unlink()
+    scene.write_text(BASE.replace("t_final = 0.5", "t_final = 1.0"))
+    capsys.readouterr()
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"kinred: error: StoreMismatch: {out / 'stages'} exists and is not a stage "
+                   "store (no config.json); choose a new or empty directory")
+    assert sorted(p.name for p in (out / "stages").iterdir()) == ["k1.npz", "solve.npz"]

@@ -30,8 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from ..experiments import kinetic_run
+    from ..scenefile import load_config
 
-    cfg = kinetic_run.load_config(args.scene, smoke=args.smoke)
+    cfg = load_config(args.scene, smoke=args.smoke)
     out = Path(args.out) if args.out else Path("results") / (Path(args.scene).stem +
                                                             ("-smoke" if args.smoke else ""))
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from .._validate import as_int
 from ..errors import InvalidInput
+from .. import scenefile
 from . import kinetic_run
 
 __all__ = ["DemoConfig", "DEMO_SCENE", "run", "scene_config"]
@@ -67,8 +68,8 @@ class DemoConfig:
                 as_int(k, "k", low=1)
 
 
-def scene_config(cfg: DemoConfig | None = None) -> kinetic_run.Config:
-    """The :class:`kinred.experiments.kinetic_run.Config` of the demo with ``cfg``'s overrides applied."""
+def scene_config(cfg: DemoConfig | None = None) -> scenefile.Config:
+    """The :class:`kinred.scenefile.Config` of the demo with ``cfg``'s overrides applied."""
     cfg = cfg or DemoConfig()
     scene = copy.deepcopy(DEMO_SCENE)
     if cfg.d is not None:
@@ -82,7 +83,7 @@ def scene_config(cfg: DemoConfig | None = None) -> kinetic_run.Config:
         scene["projection"]["k"] = [int(k) for k in cfg.ks]
     if cfg.t_final is not None:
         scene["integrate"]["t_final"] = float(cfg.t_final)
-    return kinetic_run.config_from_dict(scene, source="<kinred demo>", smoke=cfg.smoke)
+    return scenefile.config_from_dict(scene, source="<kinred demo>", smoke=cfg.smoke)
 
 
 def _clear(out: Path) -> None:

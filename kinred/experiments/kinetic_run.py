@@ -1,385 +1,51 @@
 r"""The ``kinred run`` study: a scene file → kinetic and reduced solutions → W1, bound, report.
 
-A scene file (TOML, reference in ``docs/scene-file.md``) gives the effects, the initial
+A scene file (TOML; schema, loader and :class:`~kinred.scenefile.Config` in
+:mod:`kinred.scenefile`, reference in ``docs/scene-file.md``) gives the effects, the initial
 phase-space measure, the quantization (``eps`` or ``atoms``), the projections (``k`` values,
 kind), the integrator and the outputs. :func:`run` then
 
 1. quantizes ``μ₀`` and solves the weighted particle system: ``μᴺ(t)``
-   (:func:`kinred.kinetic.solve`; stage file ``stages/solve.npz``);
-2. optionally solves a finer reference ``μᴺ′(t)`` (``stages/reference.npz``);
+   (:func:`kinred.kinetic.solve`; stage ``solve``);
+2. optionally solves a finer reference ``μᴺ′(t)`` (stage ``reference``);
 3. for every ``k``: draws ``M`` (seed ``member_seed(projection.seed, k)``), solves the reduced
    system ``νᴺ(t)``, computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly, Theorem 4.3's bound with the
    proof's constants, the reference estimate and the flocking / milling observables
-   (``stages/k{k}.npz``);
+   (stage ``k{k}``);
 4. writes ``results.npz`` and ``summary.json`` (the run's numbers: the run is complete),
    then the figures and ``report.html``. Each figure is drawn in a guarded call
    (:func:`kinred.report.draw_figure`): a figure that cannot be drawn is replaced by a note in
    the report, never loses the run.
 
-Every stage file is written atomically as soon as it is computed, together with the hash of
-the resolved configuration (``stages/config.json``); ``resume=True`` loads the finished
-stages and computes only the missing ones (a configuration mismatch is refused). On resume,
-a damaged stage file (truncated, not an ``.npz`` archive, missing arrays) is reported by a
-:class:`~kinred.errors.KinredWarning` naming it and recomputed. A damaged
-``stages/config.json`` is refused (:class:`~kinred.errors.DamagedFile` naming it): it is
-what ties the stage files to a configuration, so without it they cannot be trusted; the
-message says to delete the folder or to run into another one.
+The stages live in a :class:`kinred.io.StageStore` in ``OUT/stages`` (index ``config.json``
+with the hash of the resolved configuration, one ``.npz`` per stage written as soon as it is
+computed): ``resume=True`` loads the finished stages and computes only the missing ones; a
+folder holding a run of another configuration, or any run without ``resume``, is refused
+(:class:`~kinred.errors.StoreMismatch`); a damaged stage file is named in a
+:class:`~kinred.errors.KinredWarning` and recomputed; a damaged ``stages/config.json`` is
+refused (:class:`~kinred.errors.DamagedFile`). Random draws of the dynamics (a random-batch
+pair sum) come from the scene's ``seed``: stage ``solve`` uses ``member_seed(seed, 0)``, the
+reference ``member_seed(seed, 1)``, and each reduced run the seed of the solution it reduces.
+
+:class:`~kinred.scenefile.Config`, :func:`~kinred.scenefile.load_config` and
+:func:`~kinred.scenefile.config_from_dict` are importable from here too.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import math
-import os
 import sys
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .._rng import member_seed
-from ..errors import ConfigError, DamagedFile, InvalidInput, KinredWarning
+from ..errors import InvalidInput, KinredWarning
+from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
 
-__all__ = ["Config", "RunResult", "run", "load_config", "config_from_dict", "STAGE_HOOK_ENV"]
-
-#: Test hook: ``"<n>:kill"`` makes the process SIGKILL itself right after the n-th stage file is
-#: written (deterministic hard interruption for the resume tests). Never set it otherwise.
-STAGE_HOOK_ENV = "KINRED_TEST_KILL_AFTER_STAGE"
-
-_EFFECTS = {
-    "alignment": {"G": float, "beta": float, "on": str},
-    "morse": {"Ca": float, "la": float, "Cr": float, "lr": float, "soft": float},
-    "self_propulsion": {"a": float, "b": float},
-    "free": {},
-}
-_EFFECT_REQUIRED = {
-    "alignment": ("G", "beta"),
-    "morse": ("Ca", "la", "Cr", "lr"),
-    "self_propulsion": ("a", "b"),
-    "free": (),
-}
-
-# section -> {key: (type, required)}
-_SCHEMA = {
-    "": {"title": (str, False), "description": (str, False), "seed": (int, False),
-         "dynamics": (dict, True), "initial": (dict, True), "quantize": (dict, True),
-         "projection": (dict, True), "integrate": (dict, True), "output": (dict, False),
-         "smoke": (dict, False)},
-    "dynamics": {"d": (int, True), "effect": (list, True), "precision": (str, False)},
-    "initial": {"positions": (dict, False), "velocities": (dict, False), "phase": (dict, False),
-                "lift_to": (int, False),
-                "lift_seed": (int, False)},
-    "quantize": {"eps": (float, False), "atoms": (int, False), "rule": (str, False),
-                 "reference_atoms": (int, False), "max_atoms": (int, False)},
-    "projection": {"k": (list, True), "kind": (str, False), "seed": (int, False)},
-    "integrate": {"method": (str, False), "dt": (float, True), "t_final": (float, True),
-                  "save_every": (int, False)},
-    "output": {"yes_below": (float, False), "no_above": (float, False)},
-    "smoke": {"atoms": (int, False), "reference_atoms": (int, False), "k": (list, False),
-              "t_final": (float, False), "dt": (float, False), "save_every": (int, False)},
-}
-
-
-def _tname(t) -> str:
-    return {float: "a number", int: "an integer", str: "a string", dict: "a table",
-            list: "an array"}[t]
-
-
-def _check(value, typ, source, key):
-    if typ is float:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if ok and not math.isfinite(float(value)):
-            raise ConfigError(f"{source}: {key}: must be finite, got {value!r}")
-    elif typ is int:
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, typ)
-    if not ok:
-        raise ConfigError(f"{source}: {key}: must be {_tname(typ)}, got {value!r}")
-    return float(value) if typ is float else value
-
-
-def _table(data, section, source):
-    schema = _SCHEMA[section]
-    prefix = f"{section}." if section else ""
-    unknown = sorted(set(data) - set(schema))
-    if unknown:
-        raise ConfigError(f"{source}: {prefix}{unknown[0]}: unknown key; valid keys are "
-                          f"{', '.join(sorted(schema))}")
-    out = {}
-    for key, (typ, req) in schema.items():
-        if key not in data:
-            if req:
-                raise ConfigError(f"{source}: {prefix}{key}: missing (required, {_tname(typ)})")
-            continue
-        out[key] = _check(data[key], typ, source, prefix + key)
-    return out
-
-
-@dataclass(frozen=True)
-class Config:
-    """A resolved scene: every parameter of one ``kinred run`` (defaults applied).
-
-    Build it from a file with :func:`load_config` or from a dict with :func:`config_from_dict`.
-    ``data`` keeps the parsed TOML (without ``smoke``) for the measure sections and the hash.
-    """
-
-    source: str
-    title: str
-    description: str
-    seed: int
-    d: int
-    effects: tuple            # ((type, {params}), ...)
-    eps: float | None
-    atoms: int | None
-    rule: str
-    reference_atoms: int | None
-    max_atoms: int
-    ks: tuple
-    kind: str
-    projection_seed: int
-    method: str
-    dt: float
-    t_final: float
-    save_every: int
-    yes_below: float
-    no_above: float
-    lift_to: int | None
-    lift_seed: int
-    data: dict = field(repr=False, default_factory=dict)
-    smoke: bool = False
-    precision: str = "double"
-
-    def to_json(self) -> dict:
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in ("data",)}
-        out["effects"] = [[t, p] for t, p in self.effects]
-        out["ks"] = list(self.ks)
-        out["initial"] = self.data.get("initial")
-        return out
-
-    def digest(self) -> str:
-        """SHA-256 of the resolved configuration (what a resumed run must match)."""
-        blob = json.dumps({k: v for k, v in self.to_json().items() if k != "source"},
-                          sort_keys=True, default=str)
-        return hashlib.sha256(blob.encode()).hexdigest()
-
-    # -- builders ----------------------------------------------------------------------
-    def scene(self):
-        """The (unweighted) :class:`~kinred.dynamics.Scene` of the effects (``normalize="mean"``)."""
-        from ..dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Drift, Morse, Scene,
-                                SelfPropulsion)
-
-        effects = []
-        for typ, p in self.effects:
-            if typ == "alignment":
-                effects.append(Alignment(CuckerSmale(G=p["G"], beta=p["beta"]), on=p.get("on", "x")))
-            elif typ == "morse":
-                effects.append(AttractionRepulsion(Morse(p["Ca"], p["la"], p["Cr"], p["lr"],
-                                                         soft=p.get("soft", 0.0))))
-            elif typ == "self_propulsion":
-                effects.append(SelfPropulsion(p["a"], p["b"]))
-            else:  # free transport: x' = v, v' = 0
-                effects.append(Drift(np.zeros(self.d)))
-        return Scene(effects, normalize="mean", precision=getattr(self, "precision", "double"))
-
-    def initial_measure(self):
-        """The phase-space measure ``μ₀`` on ``ℝ²ᵈ`` (lifted when ``lift_to`` is set)."""
-        from ..kinetic import lift, phase_space
-        from ..measures import measure_from_dict
-
-        ini = self.data["initial"]
-        if "phase" in ini:
-            mu = measure_from_dict(ini["phase"], source=f"{self.source}: initial.phase")
-            if mu.dim % 2:
-                raise ConfigError(f"{self.source}: initial.phase: must have an even number of "
-                                  f"coordinates (d positions, then d velocities), got {mu.dim}")
-        else:
-            pos = measure_from_dict(ini["positions"], source=f"{self.source}: initial.positions")
-            vel = measure_from_dict(ini["velocities"], source=f"{self.source}: initial.velocities")
-            try:
-                mu = phase_space(pos, vel)
-            except InvalidInput as exc:
-                raise ConfigError(f"{self.source}: initial: {exc}") from None
-        if self.lift_to is not None:
-            mu = lift(mu, self.lift_to, seed=self.lift_seed)
-        if mu.dim != 2 * self.d:
-            raise ConfigError(f"{self.source}: dynamics.d: is {self.d} but the initial measure "
-                              f"lives on R^{mu.dim // 2} (positions) after lifting")
-        return mu
-
-    def times(self) -> np.ndarray:
-        n = int(round(self.t_final / self.dt))
-        idx = np.unique(np.r_[np.arange(0, n + 1, self.save_every), n])
-        return idx * self.dt
-
-
-def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False) -> Config:
-    """Validate a parsed scene file (format in ``docs/scene-file.md``) and resolve defaults.
-
-    Raises
-    ------
-    ConfigError
-        Unknown, missing or mistyped key; the one-line message names ``source`` and the key.
-
-    Examples
-    --------
-    >>> cfg = config_from_dict(SMALL_SCENE)
-    >>> cfg.d, cfg.ks, cfg.effects[0][0]
-    (3, (1, 2), 'alignment')
-    >>> config_from_dict({**SMALL_SCENE, "colour": 1})
-    Traceback (most recent call last):
-    ...
-    kinred.errors.ConfigError: <scene>: colour: unknown key; valid keys are ...
-    """
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: the scene must be a TOML table")
-    top = _table(data, "", source)
-    sec = {s: _table(top.get(s, {}), s, source) for s in _SCHEMA if s}
-    dyn, ini, qu, pr, it, out, sm = (sec[s] for s in ("dynamics", "initial", "quantize",
-                                                     "projection", "integrate", "output", "smoke"))
-    if smoke:
-        for key, dest in (("atoms", qu), ("reference_atoms", qu), ("k", pr), ("t_final", it),
-                          ("dt", it), ("save_every", it)):
-            if key in sm:
-                dest[key] = sm[key]
-                if key == "atoms":
-                    dest.pop("eps", None)
-    d = dyn["d"]
-    precision = dyn.get("precision", "double")
-    if precision not in ("double", "mixed"):
-        raise ConfigError(f"{source}: dynamics.precision: must be 'double' or 'mixed', got "
-                          f"{precision!r}")
-    if d < 1:
-        raise ConfigError(f"{source}: dynamics.d: must be >= 1, got {d}")
-    effects = []
-    if not dyn["effect"]:
-        raise ConfigError(f"{source}: dynamics.effect: must list at least one [[dynamics.effect]]")
-    for i, e in enumerate(dyn["effect"]):
-        key = f"dynamics.effect[{i}]"
-        if not isinstance(e, dict):
-            raise ConfigError(f"{source}: {key}: must be a table, got {e!r}")
-        if "type" not in e:
-            raise ConfigError(f"{source}: {key}.type: missing (one of {', '.join(_EFFECTS)})")
-        typ = e["type"]
-        if typ not in _EFFECTS:
-            raise ConfigError(f"{source}: {key}.type: unknown effect {typ!r}; valid: "
-                              f"{', '.join(_EFFECTS)}")
-        allowed = _EFFECTS[typ]
-        unknown = sorted(set(e) - set(allowed) - {"type"})
-        if unknown:
-            raise ConfigError(f"{source}: {key}.{unknown[0]}: unknown key for type {typ!r}; valid "
-                              f"keys are {', '.join(sorted(allowed)) or '(none)'}")
-        for req in _EFFECT_REQUIRED[typ]:
-            if req not in e:
-                raise ConfigError(f"{source}: {key}.{req}: missing (required for type {typ!r})")
-        params = {k: _check(v, allowed[k], source, f"{key}.{k}") for k, v in e.items() if k != "type"}
-        try:  # value checks (ranges) by the dynamics constructors
-            Config.scene(_Stub(d, ((typ, params),)))
-        except InvalidInput as exc:
-            raise ConfigError(f"{source}: {key}: {exc}") from None
-        effects.append((typ, params))
-    if ("eps" in qu) == ("atoms" in qu):
-        raise ConfigError(f"{source}: quantize.eps: give exactly one of quantize.eps and quantize.atoms")
-    if "eps" in qu and not qu["eps"] > 0:
-        raise ConfigError(f"{source}: quantize.eps: must be > 0, got {qu['eps']}")
-    for key in ("atoms", "reference_atoms", "max_atoms"):
-        if key in qu and qu[key] < 1:
-            raise ConfigError(f"{source}: quantize.{key}: must be >= 1, got {qu[key]}")
-    rule = qu.get("rule", "midpoint")
-    if rule not in ("midpoint", "paper"):
-        raise ConfigError(f"{source}: quantize.rule: must be 'midpoint' or 'paper', got {rule!r}")
-    ks = pr["k"]
-    if not ks or any(isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= d for k in ks):
-        raise ConfigError(f"{source}: projection.k: must be a non-empty array of integers in "
-                          f"[1, d={d}], got {ks!r}")
-    from ..projection import KINDS
-
-    kind = pr.get("kind", "gaussian")
-    if kind not in KINDS:
-        raise ConfigError(f"{source}: projection.kind: must be one of {', '.join(KINDS)}, got {kind!r}")
-    from ..integrate import SOLVERS
-
-    method = it.get("method", "euler")
-    methods = [m for m, spec in SOLVERS.items() if not spec.stochastic]   # scene files: no noise
-    if method not in methods:
-        raise ConfigError(f"{source}: integrate.method: must be one of "
-                          f"{', '.join(methods)}, got {method!r}")
-    dt, tf = it["dt"], it["t_final"]
-    if not dt > 0 or not tf > 0:
-        raise ConfigError(f"{source}: integrate.dt: dt and t_final must be > 0, got dt={dt}, "
-                          f"t_final={tf}")
-    n = tf / dt
-    if abs(n - round(n)) > 1e-9 * max(1.0, n):
-        raise ConfigError(f"{source}: integrate.t_final: must be a multiple of dt={dt}, got {tf}")
-    save_every = it.get("save_every", max(1, int(round(n)) // 20))
-    if save_every < 1:
-        raise ConfigError(f"{source}: integrate.save_every: must be >= 1, got {save_every}")
-    yes, no = out.get("yes_below", 1e-10), out.get("no_above", 1e-3)
-    if not 0 <= yes <= no:
-        raise ConfigError(f"{source}: output.yes_below: need 0 <= yes_below <= no_above, got "
-                          f"{yes}, {no}")
-    if ("phase" in ini) == ("positions" in ini or "velocities" in ini):
-        raise ConfigError(f"{source}: initial.phase: give either initial.phase (a measure on "
-                          "R^(2d)) or both initial.positions and initial.velocities")
-    if "phase" not in ini:
-        for key in ("positions", "velocities"):
-            if key not in ini:
-                raise ConfigError(f"{source}: initial.{key}: missing (a measure table on R^d)")
-    lift_to = ini.get("lift_to")
-    if lift_to is not None and lift_to != d:
-        raise ConfigError(f"{source}: initial.lift_to: must equal dynamics.d = {d}, got {lift_to}")
-    clean = {k: v for k, v in data.items() if k != "smoke"}
-    return Config(source=source, title=top.get("title", Path(source).stem),
-                  description=top.get("description", ""), seed=top.get("seed", 0), d=d,
-                  effects=tuple(effects), eps=qu.get("eps"), atoms=qu.get("atoms"), rule=rule,
-                  reference_atoms=qu.get("reference_atoms"), max_atoms=qu.get("max_atoms", 200_000),
-                  ks=tuple(int(k) for k in ks), kind=kind, projection_seed=pr.get("seed", 0),
-                  method=method, dt=dt, t_final=tf, save_every=int(save_every), yes_below=yes,
-                  no_above=no, lift_to=lift_to, lift_seed=ini.get("lift_seed", 0), data=clean,
-                  smoke=smoke, precision=precision)
-
-
-class _Stub:
-    def __init__(self, d, effects):
-        self.d, self.effects = d, effects
-
-
-def load_config(path, *, smoke: bool = False) -> Config:
-    """Read and validate a scene file (:class:`~kinred.errors.ConfigError` on any problem).
-
-    Raises
-    ------
-    ConfigError
-        The file is missing, a directory, not UTF-8, not TOML, or has an invalid key or value;
-        the one-line message names the file (and the key).
-    """
-    from ..io import read_toml
-
-    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
-        raise InvalidInput(f"path must be a str or os.PathLike, got {path!r}")
-    path = os.fspath(path)
-    data = read_toml(path, what="scene file")
-    cfg = config_from_dict(data, source=path, smoke=smoke)
-    cfg.initial_measure()  # validate the measure sections now (one-line ConfigError)
-    return cfg
-
-
-#: A tiny scene used in docstrings and tests.
-SMALL_SCENE = {
-    "dynamics": {"d": 3, "effect": [{"type": "alignment", "G": 1.0, "beta": 0.5}]},
-    "initial": {
-        "positions": {"coordinate": [{"dist": "uniform", "params": {"loc": 0.0, "scale": 1.0},
-                                      "repeat": 3, "decay": 0.5}]},
-        "velocities": {"coordinate": [{"dist": "uniform", "params": {"loc": -1.0, "scale": 2.0},
-                                       "repeat": 3, "decay": 0.5}]},
-    },
-    "quantize": {"atoms": 30},
-    "projection": {"k": [1, 2]},
-    "integrate": {"dt": 0.1, "t_final": 1.0, "save_every": 5},
-}
+__all__ = ["RunResult", "run", "write_outputs"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -452,77 +118,24 @@ _K_KEYS = ("k", "w1", "exact", "lower", "upper", "coupling", "uniform", "term_jl
            "wall_time")
 _REF_KEYS = ("w1_reference", "w1_quantization")
 
-
-class _Stages:
-    """Per-stage files with a configuration hash (resume support; see the module docstring)."""
-
-    INDEX = "stages/config.json"
-
-    def __init__(self, folder, cfg: Config, resume: bool):
-        self.folder = folder
-        self.count = 0
-        hook = os.environ.get(STAGE_HOOK_ENV, "")
-        self.kill_after = int(hook.split(":")[0]) if hook else None
-        digest = cfg.digest()
-        if folder is None:
-            return
-        have = folder.exists(self.INDEX)
-        if have and not resume:
-            raise InvalidInput(f"{folder.path} already holds a run; continue it with resume=True "
-                               "(--resume on the command line) or choose another output folder")
-        if have:
-            if self._stored_digest() != digest:
-                raise ConfigError(f"{cfg.source}: the folder {folder.path} holds a run of a "
-                                  "different configuration; use another --out folder")
-        else:
-            folder.clean_temporary()
-            folder.write_json(self.INDEX, {"digest": digest, "config": cfg.to_json()})
-
-    def _stored_digest(self):
-        path = self.folder / self.INDEX
-        try:
-            index = self.folder.read_json(self.INDEX, what="stage index")
-            if not isinstance(index, dict) or not isinstance(index.get("digest"), str):
-                raise DamagedFile(f"{path}: damaged stage index: no configuration digest",
-                                  path=str(path))
-        except DamagedFile as exc:
-            raise DamagedFile(f"{exc}; it ties the stage files to a configuration, so they cannot "
-                              f"be resumed: delete the folder {self.folder.path} and run again, "
-                              "or run into another output folder", path=str(path)) from None
-        return index["digest"]
-
-    def load(self, name, keys):
-        """The arrays of stage ``name``; ``None`` if absent or damaged (then it is recomputed)."""
-        if self.folder is None or not self.folder.exists(f"stages/{name}.npz"):
-            return None
-        path = self.folder / f"stages/{name}.npz"
-        try:
-            arrays = self.folder.read_npz(f"stages/{name}.npz", what="stage file")
-            missing = [key for key in keys if key not in arrays]
-            if missing:
-                raise DamagedFile(f"{path}: damaged stage file: no array {missing[0]!r}",
-                                  path=str(path))
-        except DamagedFile as exc:
-            warnings.warn(f"{exc}; recomputing the stage", KinredWarning, stacklevel=2)
-            return None
-        return arrays
-
-    def save(self, name, arrays):
-        if self.folder is not None:
-            self.folder.write_npz(f"stages/{name}.npz", arrays)
-        self.count += 1
-        if self.kill_after is not None and self.count >= self.kill_after:
-            import signal
-
-            os.kill(os.getpid(), signal.SIGKILL)
+#: Seed index of the solve and reference stages: ``member_seed(cfg.seed, index)``.
+_SEEDS = {"solve": 0, "reference": 1}
 
 
-def _solve_stage(cfg: Config, atoms, eps):
+def _loader(keys):
+    """Reads a stage file that must hold ``keys`` (:meth:`StageStore.get_or_compute`)."""
+    from ..io import read_npz
+
+    return lambda path: read_npz(path, what="stage file", keys=keys)
+
+
+def _solve_stage(cfg: Config, atoms, eps, seed):
     from ..kinetic import solve
 
     mu0 = cfg.initial_measure()
     sol = solve(cfg.scene(), mu0, eps=eps, atoms=atoms, t_span=(0.0, cfg.t_final), dt=cfg.dt,
-                method=cfg.method, times=cfg.times(), rule=cfg.rule, max_atoms=cfg.max_atoms)
+                method=cfg.method, times=cfg.times(), rule=cfg.rule, max_atoms=cfg.max_atoms,
+                seed=seed)
     return sol
 
 
@@ -537,7 +150,7 @@ def _sol_arrays(sol):
                 milling=m)
 
 
-def _sol_from_arrays(a, cfg: Config):
+def _sol_from_arrays(a, cfg: Config, seed):
     from ..kinetic import KineticSolution, weighted_scene
 
     return KineticSolution(t=a["t"], x=a["x"], v=a["v"], weights=a["weights"], eps=float(a["eps"]),
@@ -545,7 +158,15 @@ def _sol_from_arrays(a, cfg: Config):
                            quantize_time=float(a["quantize_time"]),
                            simulate_time=float(a["simulate_time"]),
                            scene=weighted_scene(cfg.scene(), a["weights"]), method=cfg.method,
-                           dt=cfg.dt)
+                           dt=cfg.dt, seed=seed)
+
+
+def _solution(stages, cfg: Config, name: str, atoms, eps):
+    """``(arrays, KineticSolution)`` of stage ``solve`` or ``reference``."""
+    seed = member_seed(cfg.seed, _SEEDS[name])
+    a = stages.get_or_compute(name, lambda: _sol_arrays(_solve_stage(cfg, atoms, eps, seed)),
+                              load=_loader(_SOL_KEYS))
+    return a, _sol_from_arrays(a, cfg, seed)
 
 
 def _k_stage(cfg: Config, k: int, sol, ref):
@@ -576,15 +197,28 @@ def _k_stage(cfg: Config, k: int, sol, ref):
     return out
 
 
+def _open_stages(cfg: Config, out_dir, resume: bool):
+    """``(ResultFolder or None, StageStore)``: the result folder and its ``stages/`` store."""
+    from ..io import ResultFolder, StageStore
+
+    if out_dir is None:
+        return None, StageStore(None, cfg.digest())
+    folder = ResultFolder(out_dir)
+    stages = StageStore(folder / "stages", cfg.digest(), resume=resume,
+                        describe={"config": cfg.to_json()})
+    folder.clean_temporary()
+    return folder, stages
+
+
 def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | None = None) -> RunResult:
     """Run a scene (see the module docstring); with ``out_dir`` write the result folder."""
-    from ..io import ResultFolder
-
     if not isinstance(cfg, Config):
-        raise InvalidInput(f"cfg must be a kinetic_run.Config, got {type(cfg).__name__}")
+        raise InvalidInput(f"cfg must be a kinred.scenefile.Config, got {type(cfg).__name__}")
+    if cfg.certify.enabled:
+        warnings.warn(f"{cfg.source}: certify.enabled: the certificate is not computed by "
+                      "kinred run yet; the run goes on without it", KinredWarning, stacklevel=2)
     t_start = time.perf_counter()
-    folder = None if out_dir is None else ResultFolder(out_dir)
-    stages = _Stages(folder, cfg, resume)
+    folder, stages = _open_stages(cfg, out_dir, resume)
     names = ["solve"] + (["reference"] if cfg.reference_atoms else []) + [f"k{k}" for k in cfg.ks]
     if progress is None:
         progress = sys.stderr.isatty()
@@ -592,41 +226,20 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
 
     bar = tqdm(total=len(names), desc=f"kinred run {Path(cfg.source).name}", unit="stage",
                disable=not progress, file=sys.stderr)
-    status = {}
-    a = stages.load("solve", _SOL_KEYS)
-    if a is None:
-        bar.set_postfix_str("solve")
-        a = _sol_arrays(_solve_stage(cfg, cfg.atoms, cfg.eps))
-        stages.save("solve", a)
-        status["solve"] = "computed"
-    else:
-        status["solve"] = "loaded"
+    bar.set_postfix_str("solve")
+    a, sol = _solution(stages, cfg, "solve", cfg.atoms, cfg.eps)
     bar.update(1)
-    sol = _sol_from_arrays(a, cfg)
-    ref = None
+    r = ref = None
     if cfg.reference_atoms:
-        r = stages.load("reference", _SOL_KEYS)
-        if r is None:
-            bar.set_postfix_str("reference")
-            r = _sol_arrays(_solve_stage(cfg, cfg.reference_atoms, None))
-            stages.save("reference", r)
-            status["reference"] = "computed"
-        else:
-            status["reference"] = "loaded"
+        bar.set_postfix_str("reference")
+        r, ref = _solution(stages, cfg, "reference", cfg.reference_atoms, None)
         bar.update(1)
-        ref = _sol_from_arrays(r, cfg)
     per_k = {}
     for k in cfg.ks:
-        name = f"k{k}"
-        res = stages.load(name, _K_KEYS + (_REF_KEYS if ref is not None else ()))
-        if res is None:
-            bar.set_postfix_str(name)
-            res = _k_stage(cfg, k, sol, ref)
-            stages.save(name, res)
-            status[name] = "computed"
-        else:
-            status[name] = "loaded"
-        per_k[k] = res
+        bar.set_postfix_str(f"k{k}")
+        per_k[k] = stages.get_or_compute(
+            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref),
+            load=_loader(_K_KEYS + (_REF_KEYS if ref is not None else ())))
         bar.update(1)
     bar.close()
     high = {"gamma": a["gamma"], "milling": a["milling"]}
@@ -635,7 +248,8 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
         high["n_atoms_reference"] = int(r["n_atoms"])
         high["eps_reference"] = float(r["eps"])
     result = RunResult(config=cfg, t=sol.t, n_atoms=sol.n_atoms, eps=sol.eps, per_k=per_k,
-                       high=high, stages=status, wall_time=time.perf_counter() - t_start,
+                       high=high, stages=dict(stages.status),
+                       wall_time=time.perf_counter() - t_start,
                        out_dir=None if folder is None else folder.path)
     if folder is not None:
         write_outputs(result, folder)
