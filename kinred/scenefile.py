@@ -384,6 +384,12 @@ def _random_batch(**kw):
     return RandomBatch(**kw)
 
 
+def _nufft(**kw):
+    from .pairsum import NUFFT
+
+    return NUFFT(**kw)
+
+
 def _register_builtins():
     number = "number"
     register_effect("alignment", _build_alignment, keys=(
@@ -414,9 +420,13 @@ def _register_builtins():
             shown_default="the backend's"),
     ), doc="random batch method: pair sums inside random batches of p agents, unbiased, "
            "O(N p d) per step; the run's seed draws the batches (use euler)")
-    # One line adds a backend, e.g. the NUFFT fast summation of issue 17:
-    # register_pairsum("nufft", NUFFT, keys=(Key("tol", "number", 1e-6, "target relative
-    #                  accuracy", low=0.0, high=1.0, low_open=True, high_open=True),), doc=...)
+    register_pairsum("nufft", _nufft, keys=(
+        Key("tol", number, 1e-6, "target relative accuracy of the pair sums", low=0.0,
+            high=1.0, low_open=True, high_open=True),
+        Key("max_modes", "integer", 2**20, "largest number of Fourier modes (TooLarge beyond)",
+            low=1),
+    ), doc="fast summation by non-equispaced FFTs (finufft) of smooth radial kernels, "
+           "distances in k ≤ 3 dimensions, O(N + n^k log n) per step")
     _BUILTIN.update(("effect type", n) for n in _EFFECTS)
     _BUILTIN.update(("pair-sum method", n) for n in _PAIRSUMS)
 
