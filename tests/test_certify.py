@@ -7,15 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinred.certify import Certificate, CertificateObserver, StepState, certify
+from kinred.certify import Certificate, CertificateObserver, certify
 from kinred.certify import _aggregates, _roundoff
-from kinred.certify._certify import _lockstep
 from kinred.certify._plan import make_plan
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
                              Field, Morse, Noise, PairwiseEffect, Quadratic, Scene, SelfPropulsion,
                              project_state)
-from kinred.errors import InvalidInput, KinredError, NotProjectable
-from kinred.integrate import SaveAt, simulate
+from kinred.errors import InvalidInput, KinredError, NotProjectable, SimulationDiverged
+from kinred.integrate import SaveAt, StepState, simulate
 
 
 def _jl(k, d, seed):
@@ -149,17 +148,19 @@ def test_row_spread_bound_cauchy_schwarz():
         assert np.all(lhs <= kstd * nrm * (1 + 1e-10) + 1e-14)
 
 
-# ---------------------------------------------------------------------------- lockstep identity
+# ---------------------------------------------------------------------------- simulate's loop
 class _Capture:
-    def __init__(self):
-        self.x = []
+    """Records the certificate observer's projected run after each of its steps."""
 
-    def init(self, t0, state, x0, v0):
-        self(t0, state, None)
+    def __init__(self, obs):
+        self.obs, self.y = obs, []
 
-    def __call__(self, t, state, scene):
-        self.x.append((state.x + state.shift if state.shift is not None else state.x.copy(),
-                       state.v.copy()))
+    def init(self, t0, state, scene):
+        self.update(t0, state, scene)
+
+    def update(self, t, state, scene):
+        o = self.obs
+        self.y.append((o.Y + o.shift_y if o.shift_y is not None else o.Y.copy(), o.W.copy()))
 
 
 @pytest.mark.parametrize("effects", [
@@ -167,23 +168,56 @@ class _Capture:
     [SelfPropulsion(1.0, 0.5), AttractionRepulsion(Morse(1.0, 2.0, 1.5, 0.5, soft=0.3)),
      Drift([0.5, -1.0, 0.2, 0.0])],
 ])
-def test_lockstep_runs_are_bit_identical_to_simulate(effects):
+def test_observed_runs_are_bit_identical_to_simulate(effects):
+    """The observer leaves simulate's run unchanged, and its projected run is simulate's run
+    of the projected scene, bit for bit at every step."""
     rng = np.random.default_rng(5)
     N, d, k, dt, n = 30, 4, 2, 0.05, 12
     x0, v0 = rng.normal(size=(N, d)) + 50.0, rng.normal(size=(N, d))
     scene = Scene(effects, normalize="mean", weights=rng.dirichlet(np.ones(N)))
-    cap = _Capture()
-    _lockstep(scene, x0, v0, 0.0, dt, n, cap)
-    tr = simulate(scene, x0, v0, (0.0, n * dt), dt, save=SaveAt(every=1, states=True))
-    for j, (xs, vs) in enumerate(cap.x):
-        assert np.array_equal(xs, tr.x[j]) and np.array_equal(vs, tr.v[j])
     M = _jl(k, d, 6)
-    obs = CertificateObserver(scene, M, paper=False)
-    _lockstep(scene, x0, v0, 0.0, dt, n, obs)
-    ps = scene.project(M)
-    y0, w0 = project_state(M, x0, v0)
-    tp = simulate(ps, y0, w0, (0.0, n * dt), dt, save=SaveAt(every=n, states=True))
-    assert np.array_equal(obs.Y + obs.shift_y, tp.x[-1]) and np.array_equal(obs.W, tp.v[-1])
+    obs = CertificateObserver(scene, M, x0, v0, paper=False)
+    cap = _Capture(obs)
+    save = SaveAt(every=1, states=True)
+    tr = simulate(scene, x0, v0, (0.0, n * dt), dt, save=save, observers=[obs, cap])
+    plain = simulate(scene, x0, v0, (0.0, n * dt), dt, save=save)
+    assert np.array_equal(tr.x, plain.x) and np.array_equal(tr.v, plain.v)
+    tp = simulate(scene.project(M), *project_state(M, x0, v0), (0.0, n * dt), dt, save=save)
+    assert len(cap.y) == n + 1
+    for j, (ys, ws) in enumerate(cap.y):
+        assert np.array_equal(ys, tp.x[j]) and np.array_equal(ws, tp.v[j])
+    rec = obs.records()
+    assert np.array_equal(rec["step"], np.arange(n + 1))
+    c = certify(scene, M, x0, v0, t_span=(0.0, n * dt), dt=dt, paper=False)
+    for key in ("error", "bound", "error_max", "bound_max", "w1_bound"):
+        assert np.array_equal(getattr(c, key), rec[key])
+
+
+def test_observer_refuses_other_methods_and_steps():
+    """Only fixed-step forward Euler is certified: simulate refuses other methods before the
+    first step; steps of changing size, skipped steps or another run are refused."""
+    rng = np.random.default_rng(18)
+    x0, v0 = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
+    scene = Scene([Alignment()])
+    obs = CertificateObserver(scene, _jl(2, 3, 2), x0, v0)
+    assert obs.methods == ("euler",)
+    for method in ("rk4", "heun", "rk45"):
+        with pytest.raises(InvalidInput, match=r"valid only for method in \('euler',\)"):
+            simulate(scene, x0, v0, (0, 1), 0.1, method=method, observers=[obs])
+        assert not hasattr(obs, "rec")                        # init never ran
+    view = lambda t, step, h, x=x0, v=v0: StepState(t, x, v, None, step, h)  # noqa: E731
+    obs.init(0.0, view(0.0, 0, 0.0), scene)
+    obs.update(0.1, view(0.1, 1, 0.1), scene)
+    with pytest.raises(InvalidInput, match="fixed step only"):
+        obs.update(0.3, view(0.3, 2, 0.2), scene)             # an adaptive step
+    with pytest.raises(InvalidInput, match="every accepted step"):
+        obs.update(0.3, view(0.3, 3, 0.1), scene)
+    with pytest.raises(InvalidInput, match="another scene"):
+        obs.update(0.2, view(0.2, 2, 0.1), Scene([Alignment()]))
+    with pytest.raises(InvalidInput, match="shape"):
+        obs.update(0.2, view(0.2, 2, 0.1, x0[:3], v0[:3]), scene)
+    with pytest.raises(InvalidInput, match="v0"):
+        CertificateObserver(scene, _jl(2, 3, 2), x0, None)
 
 
 # ---------------------------------------------------------------------------- validity
@@ -244,7 +278,14 @@ def _cases(draw, family):
 
 def _check_valid(case):
     scene, M, x0, v0, dt, steps, engine = case
-    c = certify(scene, M, x0, v0, t_span=(0.0, steps * dt), dt=dt, engine=engine, paper=False)
+    try:
+        c = certify(scene, M, x0, v0, t_span=(0.0, steps * dt), dt=dt, engine=engine,
+                    paper=False)
+    except SimulationDiverged:
+        # certify is simulate's run: it stops where simulate stops (an unstable Euler step)
+        with pytest.raises(SimulationDiverged):
+            simulate(scene, x0, v0, (0.0, steps * dt), dt)
+        return
     assert c.valid(), (scene, c.error, c.bound, c.error_max, c.bound_max)
     assert np.all(c.w1_bound >= c.w1_coupling)
     assert np.all(c.w1_coupling <= c.error * (1 + 1e-12) + 1e-300)      # Jensen
@@ -433,17 +474,6 @@ def test_uncovered_scenes_are_refused_before_work(effects, exc, match):
         certify(scene, _jl(2, 3, 1), x0, v0 if v0 is not None else np.zeros((5, 3)),
                 t_span=(0, 1), dt=0.1)
     assert isinstance(info.value, KinredError)
-
-
-def test_observer_must_see_every_step():
-    rng = np.random.default_rng(18)
-    x0, v0 = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
-    obs = CertificateObserver(Scene([Alignment()]), _jl(2, 3, 2))
-    state = StepState(x0.copy(), v0.copy(), None, 0, 0.1)
-    obs.init(0.0, state, x0, v0)
-    state.step = 2
-    with pytest.raises(InvalidInput, match="every accepted step"):
-        obs(0.2, state, None)
 
 
 def test_roundoff_helpers():

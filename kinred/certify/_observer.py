@@ -1,10 +1,12 @@
-r"""The per-step machinery of a certificate, as an observer of the high-dimensional run.
+r"""The per-step machinery of a certificate: an observer of the high-dimensional Euler run.
 
-:class:`CertificateObserver` is fed the high-dimensional Euler state after every accepted step
-(``observer(t, state, scene)``, ``state`` with ``.x``, ``.v`` in the integrator's working
-coordinates – positions possibly relative to ``state.shift`` – and ``.step``, ``.dt``). It
-steps the projected scene in lockstep (the same floating-point operations as
-:func:`kinred.integrate.simulate`'s Euler path, so that the projected run is bit-identical to
+:class:`CertificateObserver` follows the observer protocol of
+:func:`kinred.integrate.simulate` (``init(t0, state, scene)``, then ``update(t, state, scene)``
+after every accepted step, ``state`` a read-only :class:`~kinred.integrate.StepState` with
+``.x``, ``.v`` in the integrator's working coordinates – positions relative to
+``state.shift`` when it is not None – and ``.step``, ``.h``). It steps the projected scene
+alongside (the same floating-point operations as :func:`~kinred.integrate.simulate`'s Euler
+path, so that the projected run is bit-identical to
 ``simulate(scene.project(M), *project_state(M, x0, v0))``) and propagates the bounds of
 ``docs/certificates.md``:
 
@@ -27,7 +29,7 @@ import math
 import numpy as np
 
 from .. import observables as _obs
-from .._validate import as_choice
+from .._validate import as_array, as_choice
 from .. import _parallel
 from ..dynamics import Scene
 from ..errors import InvalidInput, SimulationDiverged
@@ -37,28 +39,7 @@ from ._aggregates import pair_pass, pair_pass_numpy
 from ._paper import PaperTracker
 from ._plan import make_plan
 
-__all__ = ["CertificateObserver", "StepState"]
-
-
-class StepState:
-    """What an observer sees after a step (the integrator's working state).
-
-    Attributes
-    ----------
-    x, v : (N, d) ndarray
-        Positions (relative to ``shift`` when it is not None) and velocities.
-    shift : (d,) ndarray or None
-        Constant added to ``x`` to get absolute positions.
-    step : int
-        Number of accepted steps so far.
-    dt : float
-        Step size.
-    """
-
-    __slots__ = ("x", "v", "shift", "step", "dt")
-
-    def __init__(self, x, v, shift, step, dt):
-        self.x, self.v, self.shift, self.step, self.dt = x, v, shift, step, dt
+__all__ = ["CertificateObserver"]
 
 
 def _wnorm(A: np.ndarray, w: np.ndarray) -> tuple[float, float]:
@@ -102,13 +83,20 @@ def _segment_min(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
 
 class CertificateObserver:
-    """Certificate of a projected run, fed the high-dimensional Euler steps.
+    """Certificate of a projected run, as an observer of the high-dimensional Euler run.
+
+    Attach it to ``simulate(scene, x0, v0, t_span, dt, method="euler",
+    observers=[obs])`` (what :func:`~kinred.certify.certify` does), then read
+    :meth:`records`.
 
     Parameters
     ----------
     scene : Scene
         The high-dimensional scene (second order, deterministic, covered effects only).
     M : (k, d) ndarray or Projection
+    x0, v0 : (N, d) array_like
+        The run's initial positions and velocities (absolute): the projected run starts from
+        ``M x0``, ``M v0``.
     save_steps : array_like of int, optional
         Step indices at which to record (default: every step).
     engine : {"fast", "numpy"}
@@ -117,36 +105,79 @@ class CertificateObserver:
         Also evaluate the paper's a-priori bounds (eq. (2.11) and (2.18)) at the saved steps
         (one high-dimensional pair pass per saved step).
 
-    Notes
-    -----
-    Call :meth:`init` with the initial working state and the absolute initial data, then the
-    observer itself after every accepted step, then :meth:`records`.
+    Attributes
+    ----------
+    methods : tuple of str
+        ``("euler",)``: the derivation covers forward Euler with a fixed step only;
+        ``simulate`` refuses other methods, and :meth:`update` refuses steps of changing
+        size.
+
+    Raises
+    ------
+    InvalidInput
+        Bad arguments, first-order scenes.
+    NotProjectable
+        Effects the certificate does not cover (see :func:`~kinred.certify.certify`).
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Scene, Alignment, CuckerSmale
+    >>> from kinred.integrate import simulate
+    >>> rng = np.random.default_rng(0)
+    >>> x0, v0 = rng.normal(size=(30, 20)), rng.normal(size=(30, 20))
+    >>> M = rng.normal(0, 1 / np.sqrt(5), (5, 20))
+    >>> scene = Scene([Alignment(CuckerSmale(1.0, 0.4))])
+    >>> obs = CertificateObserver(scene, M, x0, v0, save_steps=[0, 40], paper=False)
+    >>> tr = simulate(scene, x0, v0, (0, 2), 0.05, observers=[obs])
+    >>> rec = obs.records()
+    >>> rec["step"].tolist(), bool(np.all(rec["bound"] >= rec["error"]))
+    ([0, 40], True)
     """
 
-    def __init__(self, scene, M, *, save_steps=None, engine: str = "fast", paper: bool = True):
+    methods = ("euler",)
+
+    def __init__(self, scene, M, x0, v0, *, save_steps=None, engine: str = "fast",
+                 paper: bool = True):
         if not isinstance(scene, Scene):
             raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
         self.scene = scene
         self.P = as_projection(M)
         self.engine = as_choice(engine, "engine", ("fast", "numpy"))
+        x0 = as_array(x0, "x0", ndim=2)
+        if x0.shape[0] < 1 or x0.shape[1] < 1:
+            raise InvalidInput(f"x0 must have at least one agent and one dimension, got "
+                               f"{x0.shape}")
+        self.plan = make_plan(scene, x0.shape[0])     # refuse uncovered effects before work
+        if v0 is None:
+            raise InvalidInput("v0 must be given: certificates are for second-order scenes "
+                               "(positions and velocities)")
+        self.x0, self.v0 = x0, as_array(v0, "v0", shape=x0.shape)
+        if self.P.d != x0.shape[1]:
+            raise InvalidInput(f"M must have d = {x0.shape[1]} columns (x0's dimension), got "
+                               f"shape {self.P.shape}")
+        scene._check_state(self.x0, self.v0)
         self.save_steps = None if save_steps is None else {int(s) for s in save_steps}
         self.paper = bool(paper)
 
+    def __repr__(self) -> str:
+        return (f"CertificateObserver(N={self.x0.shape[0]}, d={self.P.d}, k={self.P.k}, "
+                f"engine={self.engine!r})")
+
     # ------------------------------------------------------------------ set-up
-    def init(self, t0: float, state: StepState, x0: np.ndarray, v0: np.ndarray) -> None:
-        """Start from the working state ``state`` of the initial data ``(x0, v0)`` (absolute)."""
-        P, scene = self.P, self.scene
-        n, d = x0.shape
-        if P.d != d:
-            raise InvalidInput(f"M must map R^{d} (the scene's dimension), got shape {P.shape}")
-        self.plan = make_plan(scene, n)
+    def init(self, t0: float, state, scene) -> None:
+        """Start from the working state ``state`` (step 0) of the initial data."""
+        P, scene = self.P, self._check_run(state, scene)
+        if state.step != 0:
+            raise InvalidInput(f"init must see step 0, got step {state.step}")
+        n, d = self.x0.shape
         self.pscene = scene.project(P)
         self.w = scene.agent_weights(n)
         self.c = scene.coefficients(n)
         self.t0 = float(t0)
+        self.h = None
         self.n, self.k = n, P.k
         self.mixed = scene.precision == "mixed"
-        y0, w0 = P.apply(x0), P.apply(v0)
+        y0, w0 = P.apply(self.x0), P.apply(self.v0)
         # the projected run, as simulate(pscene, y0, w0) starts it
         self.shift_y = _obs.centre(y0, self.w) if self.pscene.translation_invariant else None
         self.Y = y0 - self.shift_y if self.shift_y is not None else y0.copy()
@@ -191,17 +222,36 @@ class CertificateObserver:
     def _saving(self, step: int) -> bool:
         return self.save_steps is None or step in self.save_steps
 
-    # ------------------------------------------------------------------ one step
-    def __call__(self, t, state: StepState, scene=None) -> None:
-        """Advance by one accepted high-dimensional step (``state`` after it)."""
-        self.update(t, state)
+    def _check_run(self, state, scene):
+        """The run fed to the observer is the one it was built for."""
+        if scene is not self.scene:
+            raise InvalidInput(f"{self!r} was built for another scene than the run's ({scene!r})")
+        if state.x.shape != self.x0.shape or state.v is None:
+            raise InvalidInput(f"{self!r} was built for states of shape {self.x0.shape}; the "
+                               f"run's are {state.x.shape}")
+        return scene
 
-    def update(self, t, state: StepState) -> None:
-        h = state.dt
-        n_prev = state.step - 1
-        if n_prev != self._step:
+    def _check_step(self, t: float, state) -> float:
+        """The step size, refusing steps out of order or of changing size (fixed-step Euler)."""
+        if state.step != self._step + 1:
             raise InvalidInput(f"observer fed step {state.step} after step {self._step}: every "
                                "accepted step must be observed, in order")
+        h = float(state.h)
+        if self.h is None:
+            self.h = h
+        if h != self.h or t != self.t0 + state.step * h:
+            raise InvalidInput(
+                f"step {state.step} ends at t={t!r} with size {h!r} after steps of {self.h!r}: "
+                "certificates cover forward Euler with a fixed step only (method='euler', "
+                "docs/certificates.md); adaptive step sizes are not supported")
+        return h
+
+    # ------------------------------------------------------------------ one step
+    def update(self, t, state, scene) -> None:
+        """Advance by one accepted high-dimensional step (``state`` after it)."""
+        self._check_run(state, scene)
+        h = self._check_step(t, state)
+        n_prev = state.step - 1
         tn = self.t0 + n_prev * h
         PX, PV, Y, W = self.PX, self.PV, self.Y, self.W
         _, Fd = self.pscene._rhs(PX, PV, tn)                    # the defect's projected field
@@ -449,7 +499,7 @@ class CertificateObserver:
         self.saturated = bool(saturated)
 
     # ------------------------------------------------------------------ records
-    def _record(self, t: float, state: StepState) -> None:
+    def _record(self, t: float, state) -> None:
         w = self.w
         e = (self.Y - self.PX) + self.delta_c
         ev = self.W - self.PV
