@@ -87,14 +87,93 @@ def _pass_inputs(N, k, seed, weights=True):
 def test_compiled_pair_pass_equals_numpy_twin(N, k):
     pts, c, terms, bz, bs = _pass_inputs(N, k, N + k)
     rnd = (3e-14, 4e-15, 1e-12)
-    fast = _aggregates.pair_pass(pts, c, terms, bz, bs, 1e-9, rnd)
-    ref = _aggregates.pair_pass_numpy(pts, c, terms, bz, bs, 1e-9, rnd)
+    fast, ffast = _aggregates.pair_pass(pts, c, terms, bz, bs, 1e-9, rnd)
+    ref, fref = _aggregates.pair_pass_numpy(pts, c, terms, bz, bs, 1e-9, rnd)
+    assert np.max(np.abs(ffast - fref)) <= 1e-12 * np.max(np.abs(fref))
     for a, b in zip(fast, ref):
         A, B = a.stack(), b.stack()
         fin = np.isfinite(B)
         assert np.array_equal(np.isfinite(A), fin)
         scale = np.maximum(np.abs(B[fin]), 1e-300)
         assert np.max(np.abs(A[fin] - B[fin]) / scale) < 1e-12
+
+
+class _Gauss:
+    """A kernel without compiled form: exp(-s²), |φ'| ≤ √2 e^(-1/2) < 0.86."""
+
+    def __call__(self, s):
+        return np.exp(-np.asarray(s) ** 2)
+
+    def slope_bound(self, lo, hi):
+        return np.full(np.broadcast(lo, hi).shape, 0.86)
+
+
+@pytest.mark.parametrize("N,k,engine", [(60, 2, "fast"), (70, 3, "numpy"), (90, 10, "fast"),
+                                        (420, 40, "fast"), (50, 7, "numpy")])
+def test_fused_defect_field_equals_the_engines(N, k, engine):
+    """The defect's F'(Mx, Mv), from the certificate's own pair pass plus the per-agent
+    effects, equals the projected scene's own field there to 1e-13 relative (every term
+    kind, both carriers, weights, self-propulsion and a drift; a far-away cloud)."""
+    rng = np.random.default_rng(N + k)
+    d = k + 5
+    w = rng.random(N)
+    w[0] = 0.0
+    w /= w.sum()
+    sc = Scene([Alignment(CuckerSmale(0.8, 1.62)), Alignment(CuckerSmale(1.0, 1.5), on="v"),
+                AttractionRepulsion(Morse(1.0, 2.0, 1.5, 0.5, soft=0.3)),
+                Alignment(Quadratic(-0.3)), SelfPropulsion(0.7, 0.2),
+                PairwiseEffect(Morse(0.5, 1.0, 1.0, 0.5, soft=0.2), source="v", carrier="v"),
+                PairwiseEffect(_Gauss(), source="x", carrier="x"),
+                Drift(np.linspace(-1.0, 1.0, d))], normalize="sum", weights=w)
+    x0 = rng.normal(size=(N, d)) + 40.0
+    v0 = rng.normal(size=(N, d))
+    M = _jl(k, d, N)
+    obs = CertificateObserver(sc, M, x0, v0, engine=engine, paper=False)
+    simulate(sc, x0, v0, (0.0, 0.02), 0.02, observers=[obs])    # one step: bounds > 0
+    PX, PV = obs.PX, obs.PV
+    _, F = obs._pass(PX, PV, obs.Y, obs.W)
+    F = obs._local_field(F, PX, PV, 0.3)
+    ref = obs.pscene._rhs(PX, PV, 0.3)[1]
+    assert np.max(np.abs(F - ref)) <= 1e-13 * np.max(np.abs(ref))
+    assert obs.plan.terms[-1].kind == 0                       # the numpy path is in the mix
+
+
+def test_certificate_adds_one_pair_pass_and_two_projections_per_step(monkeypatch):
+    """Issue 16's cost: per step, besides the two runs' own fields (one evaluation each), the
+    certificate makes one pair pass (the defect's F'(Mx, Mv) inside it, no engine call) and
+    two projections (M x, M v of the new state, reused as the next step's start)."""
+    from kinred.certify import _observer
+    from kinred.projection import as_projection
+
+    rng = np.random.default_rng(21)
+    N, d, k, n = 40, 12, 3, 7
+    x0, v0 = rng.normal(size=(N, d)), rng.normal(size=(N, d))
+    scene = Scene([Alignment(CuckerSmale(1.0, 1.5)), SelfPropulsion(0.5, 0.1)])
+    P = as_projection(_jl(k, d, 3))
+    calls = {"rhs": [], "pass": 0, "apply": 0}
+    rhs, pp, apply = Scene._rhs, _observer.pair_pass, P.apply
+
+    def count_rhs(self, x, v, t, rng=None):
+        calls["rhs"].append(x.shape[1])
+        return rhs(self, x, v, t, rng)
+
+    def count_pass(*a, **kw):
+        calls["pass"] += 1
+        return pp(*a, **kw)
+
+    def count_apply(X):
+        calls["apply"] += 1
+        return apply(X)
+
+    monkeypatch.setattr(Scene, "_rhs", count_rhs)
+    monkeypatch.setattr(_observer, "pair_pass", count_pass)
+    monkeypatch.setattr(P, "apply", count_apply)
+    certify(scene, P, x0, v0, t_span=(0.0, n * 0.05), dt=0.05, save=SaveAt(every=n),
+            paper=False)
+    assert sorted(calls["rhs"]) == [k] * n + [d] * n          # one field per run and step
+    assert calls["pass"] == n
+    # + at t0: M x0, M v0 (the projected run), M x(0), M v(0) (working frame), M c (its shift)
+    assert calls["apply"] == 2 * n + 5
 
 
 def test_spectral_gap_bound_against_dense_eigenvalues():
@@ -112,7 +191,7 @@ def test_spectral_gap_bound_against_dense_eigenvalues():
         c = sc.coefficients(N)
         pts = {"PX": Y, "Y": Y, "PV": Y, "W": Y}
         agg = _aggregates.pair_pass(pts, c, make_plan(sc, N).terms, {"x": w, "v": w},
-                                    {"x": w, "v": w}, 0.0)[0]
+                                    {"x": w, "v": w}, 0.0)[0][0]
         bound = kappa * float(w @ np.where(np.isfinite(agg.rowmin), agg.rowmin, 0.0))
         D = np.sqrt(((Y[:, None] - Y[None]) ** 2).sum(-1))
         A = c[None, :] * g(D)
@@ -135,7 +214,7 @@ def test_row_spread_bound_cauchy_schwarz():
     pts, c, terms, bz, bs = _pass_inputs(N, k, 9)
     w = c / c.sum()
     kappa = float(N)
-    agg = _aggregates.pair_pass(pts, c, terms[:1], bz, bs, 0.0)[0]
+    agg = _aggregates.pair_pass(pts, c, terms[:1], bz, bs, 0.0)[0][0]
     kstd = np.sqrt(np.maximum(kappa * agg.s2 - agg.dsum ** 2, 0.0))
     D = np.sqrt(((pts["Y"][:, None] - pts["Y"][None]) ** 2).sum(-1))
     A = c[None, :] * terms[0].kernel(D)

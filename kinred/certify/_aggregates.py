@@ -1,5 +1,12 @@
 r"""The certificate's pair pass: every per-pair quantity of one step in one blocked pass.
 
+Besides the per-agent aggregates below, the pass returns the pair sums of the projected field
+at the projected high-dimensional state, ``Σ_terms Σⱼ cⱼ φ(ρᵢⱼ)(Mzⱼ − Mzᵢ)`` (the defect
+``τᵥ`` needs ``F′(Mx, Mv)``): it already has the distances ``ρ`` and the kernel values there,
+so the defect costs the two BLAS products of the dense engine per strip
+(``Φ Z`` with ``Z = [c z̃, c]``, ``z̃`` the carrier centred as the engine does, and the
+transposed product for the columns beyond the strip) instead of a second engine call.
+
 For each pairwise term (kernel ``φ``, source ``s``, carrier ``z``) and each agent ``i`` the
 pass returns, with ``r′ᵢⱼ`` the source distance in the projected run, ``ρᵢⱼ`` the source
 distance of the projected high-dimensional state ``(Mx, Mv)`` and
@@ -33,7 +40,7 @@ import numpy as np
 
 from ..pairsum import _kernels as _dyn
 from .. import _parallel
-from ..pairsum.dense import SMALL_K as _SMALL_K, strips as _strips
+from ..pairsum.dense import SMALL_K as _SMALL_K, _pair_products, strips as _strips
 from . import _kernels
 
 __all__ = ["TermAgg", "pair_pass", "pair_pass_numpy"]
@@ -124,12 +131,17 @@ def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin:
 
     Returns
     -------
-    list of TermAgg
+    aggs : list of TermAgg
+    field : (N, k) ndarray
+        ``Σ_terms Σⱼ cⱼ φ(ρᵢⱼ)(Mzⱼ − Mzᵢ)``, the pair sums of the projected field at
+        ``(PX, PV)``.
     """
     n = c.shape[0]
     pos = c > 0.0
     B = block or max(1, 65_536 // max(n, 1))
     outs = [_new_out(n) for _ in terms]
+    cen = {nm: pts[nm] - pts[nm].mean(axis=0) for nm in {_names(t)[2] for t in terms}}
+    field = np.zeros((n, next(iter(pts.values())).shape[1]))
     for i0 in range(0, n, B):
         i1 = min(n, i0 + B)
         dist = {}
@@ -161,7 +173,9 @@ def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin:
             o[8, i0:i1] = np.sum(cj * _rounding(term, rr, lam, rnd), axis=1)
             o[6, i0:i1] = np.min(np.where(partner, np.maximum(phi, 0.0), np.inf), axis=1)
             o[7, i0:i1] = np.sum(cj * phi * phi, axis=1)
-    return [TermAgg(o) for o in outs]
+            a = cj * np.asarray(term.kernel(rho), dtype=float)
+            field[i0:i1] += a @ cen[car] - np.sum(a, axis=1)[:, None] * cen[car][i0:i1]
+    return [TermAgg(o) for o in outs], field
 
 
 def _geometry(pts: dict, names) -> dict:
@@ -196,13 +210,15 @@ def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float
     fast = [t for t in terms if t.kind]
     slow = [t for t in terms if not t.kind]
     res = {}
-    if slow:
-        for t, agg in zip(slow, pair_pass_numpy(pts, c, slow, bz, bs, margin, rnd, block)):
-            res[id(t)] = agg
-    if fast:
-        for t, agg in zip(fast, _fast_pass(pts, c, fast, bz, bs, margin, rnd, block)):
-            res[id(t)] = agg
-    return [res[id(t)] for t in terms]
+    field = None
+    for part, fn in ((slow, pair_pass_numpy), (fast, _fast_pass)):
+        if part:
+            aggs, f = fn(pts, c, part, bz, bs, margin, rnd, block)
+            res.update({id(t): agg for t, agg in zip(part, aggs)})
+            field = f if field is None else field + f
+    if field is None:
+        field = np.zeros((c.shape[0], next(iter(pts.values())).shape[1]))
+    return [res[id(t)] for t in terms], field
 
 
 def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
@@ -212,6 +228,12 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
     geo = _geometry(pts, names)
+    # per carrier (centred as the engine does): its terms and the operand Z = [c z~, c]
+    by_car = {}
+    for t, term in enumerate(fast):
+        by_car.setdefault(_names(term)[2], []).append(t)
+    cen = {car: _centred(geo[car], pts[car]) for car in by_car}
+    zext = {car: _dyn.zext_rows(cen[car], c, np.empty((n, k + 1))) for car in by_car}
     # below a few hundred agents a thread hand-off costs more than the work it shares
     nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
     strips = _strips(n, block, k, nthreads)
@@ -226,19 +248,26 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
 
     def work(g, my_strips):
         q = {nm: np.empty(maxel) for nm in names}
-        buf = np.empty((9, n))
+        ph = np.empty(maxel)
+        buf = np.empty((10, n))
         scr = np.empty((3, n))
         outs = [_new_out(n) for _ in fast]
+        acc = {car: np.zeros((n, k + 1)) for car in by_car}
         for i0, i1 in my_strips:
             shape = (i1 - i0, n - i0)
             blk = {nm: _sqdist(geo[nm], i0, i1, q[nm][: shape[0] * shape[1]].reshape(shape))
                    for nm in names}
-            for t, term in enumerate(fast):
-                run, true, car = _names(term)
-                kind, par = specs[t]
-                _kernels.strip_term(i0, blk[run], blk[true], blk[car], c, pos, vecs[t][0],
-                                    vecs[t][1], kind, par, margin, rnd, outs[t], buf, scr)
-        return outs
+            phit = ph[: shape[0] * shape[1]].reshape(shape)
+            for car, ts in by_car.items():
+                for a, t in enumerate(ts):
+                    run, true, _ = _names(fast[t])
+                    kind, par = specs[t]
+                    _kernels.strip_term(i0, blk[run], blk[true], blk[car], c, pos, vecs[t][0],
+                                        vecs[t][1], kind, par, margin, rnd, outs[t], buf, scr,
+                                        phit, int(a > 0))
+                _kernels.square_fill(phit)
+                _pair_products(phit, zext[car], acc[car], i0, i1, n)
+        return outs, acc
 
     groups = [[] for _ in range(nthreads)]
     loads = [0] * nthreads
@@ -247,10 +276,22 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
         groups[g].append((i0, i1))
         loads[g] += (i1 - i0) * (n - i0)
     results = _parallel.run_parallel(work, [sorted(gr) for gr in groups])
-    outs = results[0]
-    for o2 in results[1:]:
+    outs, acc = results[0]
+    for o2, a2 in results[1:]:
         for t in range(len(fast)):
             outs[t][:6] += o2[t][:6]
             outs[t][7:] += o2[t][7:]
             np.minimum(outs[t][6], o2[t][6], out=outs[t][6])
-    return [TermAgg(o) for o in outs]
+        for car in by_car:
+            acc[car] += a2[car]
+    field = np.zeros((n, k))
+    for car in by_car:
+        field += _dyn.pair_finish(acc[car], cen[car], np.empty((n, k)))
+    return [TermAgg(o) for o in outs], field
+
+
+def _centred(g, Z: np.ndarray) -> np.ndarray:
+    """``Z − mean(Z)`` as the engine centres carriers (reusing a Gram geometry's)."""
+    if g[0] == "gram":
+        return g[1]
+    return _dyn.centre_rows(np.ascontiguousarray(Z), np.empty(Z.shape))

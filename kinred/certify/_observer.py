@@ -11,10 +11,12 @@ path, so that the projected run is bit-identical to
 ``docs/certificates.md``:
 
 * the defects ``τₓ = PX⁺ − PX − h PV`` and ``τᵥ = PV⁺ − PV − h F′(PX, PV)`` of the projected
-  high-dimensional trajectory ``(PX, PV) = (M x, M v)`` in the projected Euler scheme (one
-  evaluation of the projected scene's own field per step), kept as vectors;
+  high-dimensional trajectory ``(PX, PV) = (M x, M v)`` in the projected Euler scheme, kept
+  as vectors (``F′(PX, PV)``'s pair sums from the pair pass below, its per-agent effects
+  from the projected scene; ``M x``, ``M v`` projected once per step and reused as the next
+  step's start);
 * the stability of the projected Euler map between ``(PX, PV)`` and the projected run
-  ``(Y, W)``, from one pair pass (:mod:`kinred.certify._aggregates`);
+  ``(Y, W)``, from the same pair pass (:mod:`kinred.certify._aggregates`);
 * a weighted-RMS recursion (mean and fluctuation parts) and a per-agent (ℓ∞) recursion,
   each capped by the other after every step.
 
@@ -254,9 +256,9 @@ class CertificateObserver:
         n_prev = state.step - 1
         tn = self.t0 + n_prev * h
         PX, PV, Y, W = self.PX, self.PV, self.Y, self.W
-        _, Fd = self.pscene._rhs(PX, PV, tn)                    # the defect's projected field
         dY, dW = self.pscene._rhs(Y, W, tn)                     # the projected step's field
-        aggs = self._pass(PX, PV, Y, W)
+        aggs, Fd = self._pass(PX, PV, Y, W)
+        Fd = self._local_field(Fd, PX, PV, tn)                  # F'(PX, PV): the defect's
         coef = self._coefficients(aggs, PV, W, h)
         pre = self._allowance_inputs(aggs, PX, PV, Y, W, Fd, dW)
         # the projected Euler step, exactly as simulate's (dY may be W itself: Y first)
@@ -305,14 +307,22 @@ class CertificateObserver:
         return out
 
     def _pass(self, PX, PV, Y, W):
+        """The pair pass: per-term aggregates and the pair sums of ``F′(PX, PV)``."""
         pts = {"PX": PX, "PV": PV, "Y": Y, "W": W}
         fn = pair_pass if self.engine == "fast" else pair_pass_numpy
         if not self.plan.terms:
-            return []
+            return [], np.zeros_like(PV)
         bz = {"x": self.fx, "v": self.bv}
         bs = {"x": self.fx, "v": self.fv}
         return fn(pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
                   _ro.pass_constants(self.n, self.mixed))
+
+    def _local_field(self, F, PX, PV, t) -> np.ndarray:
+        """``F′(PX, PV)`` from its pair sums ``F``: the projected scene's per-agent effects
+        (self-propulsion, drifts) added in place, as its own field adds them."""
+        for e in self.pscene._local:
+            F += e.drift(PX, PV, t)
+        return F
 
     def _coefficients(self, aggs, PV, W, h) -> dict:
         """Contraction and coupling factors of the projected Euler map (docs/certificates.md §3)."""
