@@ -255,7 +255,7 @@ def test_observed_runs_are_bit_identical_to_simulate(effects):
     x0, v0 = rng.normal(size=(N, d)) + 50.0, rng.normal(size=(N, d))
     scene = Scene(effects, normalize="mean", weights=rng.dirichlet(np.ones(N)))
     M = _jl(k, d, 6)
-    obs = CertificateObserver(scene, M, x0, v0, paper=False)
+    obs = CertificateObserver(scene, M, x0, v0, paper=False, states=True)
     cap = _Capture(obs)
     save = SaveAt(every=1, states=True)
     tr = simulate(scene, x0, v0, (0.0, n * dt), dt, save=save, observers=[obs, cap])
@@ -267,6 +267,7 @@ def test_observed_runs_are_bit_identical_to_simulate(effects):
         assert np.array_equal(ys, tp.x[j]) and np.array_equal(ws, tp.v[j])
     rec = obs.records()
     assert np.array_equal(rec["step"], np.arange(n + 1))
+    assert np.array_equal(rec["y"], tp.x) and np.array_equal(rec["w"], tp.v)   # kept states
     c = certify(scene, M, x0, v0, t_span=(0.0, n * dt), dt=dt, paper=False)
     for key in ("error", "bound", "error_max", "bound_max", "w1_bound"):
         assert np.array_equal(getattr(c, key), rec[key])
@@ -297,6 +298,8 @@ def test_observer_refuses_other_methods_and_steps():
         obs.update(0.2, view(0.2, 2, 0.1, x0[:3], v0[:3]), scene)
     with pytest.raises(InvalidInput, match="v0"):
         CertificateObserver(scene, _jl(2, 3, 2), x0, None)
+    with pytest.raises(InvalidInput, match="states"):
+        CertificateObserver(scene, _jl(2, 3, 2), x0, v0, states="xv")
 
 
 # ---------------------------------------------------------------------------- validity
@@ -405,6 +408,10 @@ def test_first_step_bound_is_the_defect():
                 t_span=(0, 0.05), dt=0.05)
     assert c.error[1] > 1e-4
     assert 1.0 <= c.bound[1] / c.error[1] < 1.0 + 1e-9
+    # the velocities carry the whole error after one step (e¹ = −τₓ⁰ is round-off)
+    assert c.error_v[1] == pytest.approx(c.error[1], rel=1e-9)
+    assert 1.0 <= c.bound_v[1] / c.error_v[1] < 1.0 + 1e-9
+    assert c.labels["bound_v"] == "certified bound" and c.labels["error_v"] == "measured"
 
 
 # ---------------------------------------------------------------------------- tightness

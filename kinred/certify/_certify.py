@@ -28,6 +28,8 @@ LABELS = types.MappingProxyType({
     "bound": "certified bound",
     "bound_max": "certified bound",
     "w1_bound": "certified bound",
+    "error_v": "measured",
+    "bound_v": "certified bound",
     "roundoff": "estimate",
     "paper_bound": "a-priori bound (paper's constants)",
     "paper_bound_max": "a-priori bound (paper's constants)",
@@ -59,6 +61,9 @@ class Certificate:
         Measured ``Σᵢ wᵢ |(eᵢ, εᵢ)|`` ≥ ``W1((μᴺ)_M(t), νᴺ(t))`` (the middle term of Theorem 4.3).
     w1_bound : (T,) ndarray
         Certified bound of ``w1_coupling`` (hence of that W1).
+    error_v, bound_v : (T,) ndarray
+        The velocities alone: measured ``(Σᵢ wᵢ|εᵢ|²)^{1/2}`` and its certified bound (the
+        relative projection error of Figure 4 is ``error_v`` over ``(Σᵢ wᵢ|Mvᵢ|²)^{1/2}``).
     paper_bound : (T,) ndarray
         The RHS of eq. (2.18) with its constants measured along the run (Cucker–Smale only,
         else NaN).
@@ -88,6 +93,8 @@ class Certificate:
     roundoff: np.ndarray
     w1_coupling: np.ndarray
     w1_bound: np.ndarray
+    error_v: np.ndarray
+    bound_v: np.ndarray
     paper_bound: np.ndarray
     paper_bound_max: np.ndarray
     saturated: np.ndarray
@@ -118,8 +125,10 @@ class Certificate:
         return float(np.max(r)) if r.size else math.nan
 
     def valid(self) -> bool:
-        """Whether ``bound >= error`` and ``bound_max >= error_max`` at every saved time."""
-        return bool(np.all(self.bound >= self.error) and np.all(self.bound_max >= self.error_max))
+        """Whether ``bound >= error``, ``bound_max >= error_max`` and ``bound_v >= error_v``
+        at every saved time."""
+        return bool(np.all(self.bound >= self.error) and np.all(self.bound_max >= self.error_max)
+                    and np.all(self.bound_v >= self.error_v))
 
 
 def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=None,
@@ -230,6 +239,7 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     return Certificate(t=t, error=rec["error"], error_max=rec["error_max"], bound=rec["bound"],
                        bound_max=rec["bound_max"], roundoff=rec["roundoff"],
                        w1_coupling=rec["w1_coupling"], w1_bound=rec["w1_bound"],
+                       error_v=rec["error_v"], bound_v=rec["bound_v"],
                        paper_bound=rec["paper_bound"], paper_bound_max=rec["paper_bound_max"],
                        saturated=rec["saturated"].astype(bool), method=method, dt=dt,
                        n_steps=n_steps, n_agents=obs.x0.shape[0],

@@ -106,6 +106,10 @@ class CertificateObserver:
     paper : bool
         Also evaluate the paper's a-priori bounds (eq. (2.11) and (2.18)) at the saved steps
         (one high-dimensional pair pass per saved step).
+    states : bool or {"x", "v"}
+        Also keep the projected run's states at the saved steps (``True``: both;
+        ``records()["y"]``, absolute positions, and ``["w"]``, velocities), as
+        ``simulate(scene.project(M), ..., save=SaveAt(states=...))`` would record them.
 
     Attributes
     ----------
@@ -139,7 +143,7 @@ class CertificateObserver:
     methods = ("euler",)
 
     def __init__(self, scene, M, x0, v0, *, save_steps=None, engine: str = "fast",
-                 paper: bool = True):
+                 paper: bool = True, states=False):
         if not isinstance(scene, Scene):
             raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
         self.scene = scene
@@ -160,6 +164,9 @@ class CertificateObserver:
         scene._check_state(self.x0, self.v0)
         self.save_steps = None if save_steps is None else {int(s) for s in save_steps}
         self.paper = bool(paper)
+        if states not in (True, False, "x", "v"):
+            raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {states!r}")
+        self.keep = {"y": states in (True, "x"), "w": states in (True, "v")}
 
     def __repr__(self) -> str:
         return (f"CertificateObserver(N={self.x0.shape[0]}, d={self.P.d}, k={self.P.k}, "
@@ -215,7 +222,9 @@ class CertificateObserver:
                    vm * (1 + u4) + u4 * nv, vf * (1 + u4) + u4 * nv]
         self.R2 = [0.0, 0.0, 0.0, 0.0]          # the round-off share of the L2 recursion
         self.rec = {key: [] for key in ("t", "step", "error", "error_max", "bound", "bound_max",
-                                        "roundoff", "w1_bound", "w1_coupling", "saturated")}
+                                        "roundoff", "w1_bound", "w1_coupling", "saturated",
+                                        "error_v", "bound_v")}
+        self.kept = {key: [] for key, on in self.keep.items() if on}
         self.tracker = PaperTracker(scene, P, self.plan, self.w) if self.paper else None
         self._step = 0
         if self._saving(0):
@@ -533,14 +542,27 @@ class CertificateObserver:
         rec["saturated"].append(float(self.saturated))
         rec["w1_coupling"].append(float(w @ np.sqrt(ex2 + ev2)))
         rec["w1_bound"].append(min(rec["bound"][-1], float(w @ per)))
+        # the velocities alone: ‖ε‖_w ≤ (|ε̄|² + ‖ε̃‖²)^½ and ≤ ‖bᵛ‖_w
+        lv = min(math.hypot(self.L2[2], self.L2[3]), math.sqrt(float(w @ self.bv ** 2)))
+        rec["error_v"].append(math.sqrt(float(w @ ev2)))
+        rec["bound_v"].append((lv + mu_v) * grow)
+        if "y" in self.kept:
+            self.kept["y"].append(self.Y + self.shift_y if self.shift_y is not None
+                                  else self.Y.copy())
+        if "w" in self.kept:
+            self.kept["w"].append(self.W.copy())
         if self.tracker is not None:
             with _parallel.blas_threads(1):
                 self.tracker.record(t - self.t0, state.x, state.v, self.PX, self.PV, self.Y,
                                     self.W)
 
     def records(self) -> dict:
-        """The recorded series as arrays (plus the paper's bounds when requested)."""
+        """The recorded series as arrays: those of :class:`~kinred.certify.Certificate`
+        (``error``, ``bound``, ..., ``error_v``, ``bound_v``, the paper's bounds, NaN unless
+        requested), ``t`` and ``step``, and the projected states ``y``, ``w`` (``(T, N, k)``)
+        when kept."""
         out = {key: np.asarray(val, dtype=float) for key, val in self.rec.items()}
+        out.update({key: np.array(val) for key, val in self.kept.items()})
         out["step"] = out["step"].astype(np.int64)
         if self.tracker is not None:
             out.update(self.tracker.bounds())
