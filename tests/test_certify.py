@@ -98,6 +98,30 @@ def test_compiled_pair_pass_equals_numpy_twin(N, k):
         assert np.max(np.abs(A[fin] - B[fin]) / scale) < 1e-12
 
 
+@pytest.mark.parametrize("N,k", [(60, 2), (90, 10), (420, 6), (450, 40)])
+def test_compiled_strip_worker_equals_the_python_strip_loop(N, k, monkeypatch):
+    """A thread's share of the pass as one compiled call (no GIL) makes the same calls as
+    the Python strip loop: identical aggregates and defect field, one or two threads."""
+    from kinred.dynamics import set_num_threads, get_num_threads
+
+    pts, c, terms, bz, bs = _pass_inputs(N, k, 3 * N + k)
+    fast = [t for t in terms if t.kind]
+    rnd = (3e-14, 4e-15, 1e-12)
+    before = get_num_threads()
+    try:
+        for threads in (1, 2):
+            set_num_threads(threads)
+            monkeypatch.setattr(_aggregates, "_COMPILED", True)
+            a, fa = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+            monkeypatch.setattr(_aggregates, "_COMPILED", False)
+            b, fb = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+            assert np.array_equal(fa, fb)
+            for x, y in zip(a, b):
+                assert np.array_equal(x.stack(), y.stack())
+    finally:
+        set_num_threads(before)
+
+
 class _Gauss:
     """A kernel without compiled form: exp(-s²), |φ'| ≤ √2 e^(-1/2) < 0.86."""
 

@@ -29,19 +29,26 @@ distance of the projected high-dimensional state ``(Mx, Mv)`` and
 Two implementations: :func:`pair_pass` (row strips of the upper triangle as in the dynamics
 engine, squared distances by differences for ``k ≤ 3`` and BLAS Gram blocks of centred
 coordinates with the engine's close-pair fix-up otherwise, the per-pair work in the numba
-kernel :func:`kinred.certify._kernels.strip_term`; memory ``O(N·block)``) and its plain-numpy
+kernel :func:`kinred.certify._kernels.strip_term`; memory ``O(N·block)``; each engine thread's
+strips in one compiled call without the GIL, :func:`kinred.certify._kernels.pass_strips`, or
+the same calls from a Python loop when numpy's BLAS symbols are not found) and its plain-numpy
 twin :func:`pair_pass_numpy` (full rows, distances by differences, the kernels' own
 ``__call__`` and ``slope_bound``), which also serves kernels without a compiled form.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..pairsum import _kernels as _dyn
 from .. import _parallel
-from ..pairsum.dense import SMALL_K as _SMALL_K, _pair_products, strips as _strips
+from ..pairsum.dense import SMALL_K as _SMALL_K, _balance, _pair_products, strips as _strips
 from . import _kernels
+
+#: Whether a thread's share of the pass runs as one compiled call (numpy's BLAS symbols found).
+_COMPILED = bool(_dyn.HAVE_COMPILED_FOR[np.dtype(np.float64)])
 
 __all__ = ["TermAgg", "pair_pass", "pair_pass_numpy"]
 
@@ -221,77 +228,130 @@ def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float
     return [res[id(t)] for t in terms], field
 
 
-def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
-    """The compiled pass: strips dealt to the engine's threads (each with its own
-    accumulators, summed at the end), BLAS single-threaded inside the region."""
+@dataclass
+class _Strips:
+    """The compiled pass's inputs, built once per pass: the point sets' geometry, stacked
+    (``YT (S, k, N)`` transposed rows for ``k ≤ 3``; else ``Yc (S, N, k)`` centred rows,
+    ``nrm (S, N)`` their squared norms and ``R`` the raw rows, a tuple), the per-term arrays
+    and, per carrier, ``Z = [c z̃, c]`` (``(C, N, k+1)``) and the centred ``z̃``."""
+
+    diff: bool
+    YT: np.ndarray
+    Yc: np.ndarray
+    nrm: np.ndarray
+    R: tuple
+    sets: np.ndarray       # (T, 3): run, true and carrier point-set indices of each term
+    kind: np.ndarray
+    par: np.ndarray        # (T, 5)
+    bz: np.ndarray         # (T, N)
+    bs: np.ndarray         # (T, N)
+    tcz: np.ndarray        # (T,) carrier index of each term
+    Z: np.ndarray
+    cen: list
+
+    def geo(self, s: int) -> tuple:
+        """Point set ``s`` as :func:`_sqdist` takes it."""
+        if self.diff:
+            return ("diff", self.YT[s])
+        return ("gram", self.Yc[s], self.nrm[s], self.R[s])
+
+
+def _prepare(pts, c, fast, bz, bs) -> _Strips:
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
-    geo = _geometry(pts, names)
-    # per carrier (centred as the engine does): its terms and the operand Z = [c z~, c]
-    by_car = {}
-    for t, term in enumerate(fast):
-        by_car.setdefault(_names(term)[2], []).append(t)
-    cen = {car: _centred(geo[car], pts[car]) for car in by_car}
-    zext = {car: _dyn.zext_rows(cen[car], c, np.empty((n, k + 1))) for car in by_car}
+    raw = tuple(np.ascontiguousarray(pts[nm], dtype=float) for nm in names)
+    diff = k <= _SMALL_K
+    YT = np.stack([Y.T for Y in raw]) if diff else np.empty((len(names), 0, 0))
+    Yc = np.empty((len(names), n, k) if not diff else (len(names), 0, 0))
+    nrm = np.empty((len(names), n) if not diff else (len(names), 0))
+    for s_, Y in enumerate(raw if not diff else ()):
+        _dyn.centre_rows(Y, Yc[s_])
+        _dyn.gram_rows(Yc[s_], Yc[s_], nrm[s_], False)
+    cars = list(dict.fromkeys(_names(t)[2] for t in fast))      # first-appearance order
+    cen = [Yc[names.index(car)] if not diff else
+           _dyn.centre_rows(raw[names.index(car)], np.empty((n, k))) for car in cars]
+    vz = [np.ascontiguousarray(a, dtype=float) for t in fast for a in _bvecs(t, bz, bs)]
+    return _Strips(
+        diff, YT, Yc, nrm, raw,
+        np.array([[names.index(nm) for nm in _names(t)] for t in fast], dtype=np.int64),
+        np.array([t.kind for t in fast], dtype=np.int64),
+        np.array([t.params + (0.0,) * (5 - len(t.params)) for t in fast], dtype=float),
+        np.stack(vz[0::2]), np.stack(vz[1::2]),
+        np.array([cars.index(_names(t)[2]) for t in fast], dtype=np.int64),
+        np.stack([_dyn.zext_rows(z, c, np.empty((n, k + 1))) for z in cen]), cen)
+
+
+def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
+    """The compiled pass: strips dealt to the engine's threads (each with its own
+    accumulators, summed at the end), BLAS single-threaded inside the region; each thread's
+    share is one compiled call (:func:`_kernels.pass_strips`, no GIL) when numpy's BLAS
+    symbols are found, else the same calls from a Python loop (:func:`_loop_share`)."""
+    n = c.shape[0]
+    k = next(iter(pts.values())).shape[1]
+    sp = _prepare(pts, c, fast, bz, bs)
     # below a few hundred agents a thread hand-off costs more than the work it shares
     nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
     strips = _strips(n, block, k, nthreads)
     nthreads = min(nthreads, len(strips))
     maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
-    pos = c > 0.0
-    vecs = [tuple(np.ascontiguousarray(a) for a in _bvecs(t, bz, bs)) for t in fast]
-    specs = [(np.int64(t.kind), np.array(t.params + (0.0,) * (5 - len(t.params)), dtype=float))
-             for t in fast]
-    margin = float(margin)
-    rnd = np.asarray(rnd, dtype=float)
-
-    def work(g, my_strips):
-        q = {nm: np.empty(maxel) for nm in names}
-        ph = np.empty(maxel)
-        buf = np.empty((10, n))
-        scr = np.empty((3, n))
-        outs = [_new_out(n) for _ in fast]
-        acc = {car: np.zeros((n, k + 1)) for car in by_car}
-        for i0, i1 in my_strips:
-            shape = (i1 - i0, n - i0)
-            blk = {nm: _sqdist(geo[nm], i0, i1, q[nm][: shape[0] * shape[1]].reshape(shape))
-                   for nm in names}
-            phit = ph[: shape[0] * shape[1]].reshape(shape)
-            for car, ts in by_car.items():
-                for a, t in enumerate(ts):
-                    run, true, _ = _names(fast[t])
-                    kind, par = specs[t]
-                    _kernels.strip_term(i0, blk[run], blk[true], blk[car], c, pos, vecs[t][0],
-                                        vecs[t][1], kind, par, margin, rnd, outs[t], buf, scr,
-                                        phit, int(a > 0))
-                _kernels.square_fill(phit)
-                _pair_products(phit, zext[car], acc[car], i0, i1, n)
-        return outs, acc
-
-    groups = [[] for _ in range(nthreads)]
-    loads = [0] * nthreads
-    for i0, i1 in sorted(strips, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
-        g = loads.index(min(loads))
-        groups[g].append((i0, i1))
-        loads[g] += (i1 - i0) * (n - i0)
-    results = _parallel.run_parallel(work, [sorted(gr) for gr in groups])
+    groups = _balance(strips, n, nthreads)
+    args = (sp, c, c > 0.0, float(margin), np.asarray(rnd, dtype=float), maxel)
+    share = _compiled_share if _COMPILED else _loop_share
+    results = _parallel.run_parallel(lambda g, grp: share(grp, *args), groups)
     outs, acc = results[0]
     for o2, a2 in results[1:]:
-        for t in range(len(fast)):
-            outs[t][:6] += o2[t][:6]
-            outs[t][7:] += o2[t][7:]
-            np.minimum(outs[t][6], o2[t][6], out=outs[t][6])
-        for car in by_car:
-            acc[car] += a2[car]
+        outs[:, :6] += o2[:, :6]
+        outs[:, 7:] += o2[:, 7:]
+        np.minimum(outs[:, 6], o2[:, 6], out=outs[:, 6])
+        acc += a2
     field = np.zeros((n, k))
-    for car in by_car:
-        field += _dyn.pair_finish(acc[car], cen[car], np.empty((n, k)))
+    for cz, z in enumerate(sp.cen):
+        field += _dyn.pair_finish(acc[cz], z, np.empty((n, k)))
     return [TermAgg(o) for o in outs], field
 
 
-def _centred(g, Z: np.ndarray) -> np.ndarray:
-    """``Z − mean(Z)`` as the engine centres carriers (reusing a Gram geometry's)."""
-    if g[0] == "gram":
-        return g[1]
-    return _dyn.centre_rows(np.ascontiguousarray(Z), np.empty(Z.shape))
+def _new_outs(nt: int, n: int) -> np.ndarray:
+    outs = np.zeros((nt, len(_ROWS), n))
+    outs[:, 6] = np.inf
+    return outs
+
+
+def _compiled_share(grp, sp, c, pos, margin, rnd, maxel):
+    """One thread's strips ``grp`` in one compiled call: ``(outs, acc)``."""
+    n, k1 = sp.Z.shape[1:]
+    outs = _new_outs(len(sp.kind), n)
+    acc = np.empty(sp.Z.shape)
+    _kernels.pass_strips(np.array(grp, dtype=np.int64).reshape(-1, 2), sp.diff, sp.YT, sp.Yc,
+                         sp.nrm, sp.R, _dyn.tau_for(k1 - 1), sp.sets, sp.kind, sp.par, sp.bz,
+                         sp.bs, sp.tcz, c, pos, margin, rnd, sp.Z, acc, outs,
+                         np.empty((len(sp.R), maxel)), np.empty(maxel), np.empty((10, n)),
+                         np.empty((3, n)))
+    return outs, acc
+
+
+def _loop_share(grp, sp, c, pos, margin, rnd, maxel):
+    """Twin of :func:`_compiled_share`: the same calls, strip by strip from Python."""
+    n = c.shape[0]
+    q = np.empty((len(sp.R), maxel))
+    ph = np.empty(maxel)
+    buf = np.empty((10, n))
+    scr = np.empty((3, n))
+    outs = _new_outs(len(sp.kind), n)
+    acc = np.zeros(sp.Z.shape)
+    for i0, i1 in grp:
+        shape = (i1 - i0, n - i0)
+        size = shape[0] * shape[1]
+        blk = [_sqdist(sp.geo(j), i0, i1, q[j, :size].reshape(shape)) for j in range(len(sp.R))]
+        phit = ph[:size].reshape(shape)
+        for cz in range(sp.Z.shape[0]):
+            add = 0
+            for t in np.flatnonzero(sp.tcz == cz):
+                r, tr, car = sp.sets[t]
+                _kernels.strip_term(i0, blk[r], blk[tr], blk[car], c, pos, sp.bz[t], sp.bs[t],
+                                    sp.kind[t], sp.par[t], margin, rnd, outs[t], buf, scr,
+                                    phit, add)
+                add = 1
+            _kernels.square_fill(phit)
+            _pair_products(phit, sp.Z[cz], acc[cz], i0, i1, n)
+    return outs, acc

@@ -47,6 +47,17 @@ phit, add)`` (``buf (10, ≥ N)``, ``scr (3, ≥ N)`` scratch)
     0, the part below it mirrored (``φ`` is symmetric), so that the block feeds the two BLAS
     products of the dense engine (``kinred.pairsum.dense``). Twin: ``np.triu(P, 1) +
     np.triu(P, 1).T`` on the square.
+``pass_strips(strips, ...)``
+    One thread's share of the pass in one compiled call without the GIL (as the dynamics
+    engine's ``pair_strips``): per strip the squared distances of every point set (by
+    differences, or BLAS ``−2 Y Yᵀ`` plus the close-pair fix-up), per carrier its terms'
+    :func:`strip_term`, :func:`square_fill` and the two products ``acc += Φ Z``. Twin: the
+    Python strip loop of :func:`kinred.certify._aggregates._fast_pass` (same calls, same
+    order), used when numpy's BLAS symbols are not found.
+
+The compiled functions inline kernels of :mod:`kinred.pairsum._kernels` (``pow_row64``, the
+distance kernels, ``cblas_dgemm``); numba's cache of this file does not see changes there:
+after editing them, touch this file.
 """
 
 from __future__ import annotations
@@ -55,9 +66,9 @@ import math
 
 from numba import njit
 
-from ..pairsum._kernels import pow_row64
+from ..pairsum._kernels import _nb_gemm, pow_row64, sqdist_diff, sqdist_gram_fix
 
-__all__ = ["strip_term", "square_fill"]
+__all__ = ["strip_term", "square_fill", "pass_strips"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -295,3 +306,45 @@ def _accumulate(i, jstart, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6,
     out[6, i] = s6
     out[7, i] += s7
     out[8, i] += s8
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pass_strips(strips, diff, YT, Yc, nrm, R, tau, sets, tkind, tpar, tbz, tbs, tcz, c, pos,
+                margin, rnd, Z, acc, outs, qbuf, phbuf, buf, scr):  # pragma: no cover - compiled
+    # strips (S, 2); point sets s: YT[s] (k, N) if diff else Yc[s] (N, k) centred, nrm[s],
+    # R[s] raw (a tuple); per term t: sets[t] = (run, true, carrier) point-set indices, kind,
+    # params, bz/bs rows, carrier index tcz; Z (C, N, k+1), acc (C, N, k+1) zeroed here;
+    # outs (T, 9, N) with outs[:, 6] = inf; qbuf (point sets, >= maxel), phbuf (>= maxel)
+    N = c.shape[0]
+    ns = qbuf.shape[0]
+    nt = sets.shape[0]
+    acc[:] = 0.0
+    for st in range(strips.shape[0]):
+        i0 = strips[st, 0]
+        i1 = strips[st, 1]
+        bb = i1 - i0
+        m = N - i0
+        for s in range(ns):
+            q = qbuf[s, : bb * m].reshape((bb, m))
+            if diff:
+                sqdist_diff(YT[s], i0, i1, i0, q)
+            else:
+                Rs = R[s]
+                _nb_gemm(-2.0, Yc[s, i0:i1], False, Yc[s, i0:], True, 0.0, q)
+                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau, 0)
+        ph = phbuf[: bb * m].reshape((bb, m))
+        for cz in range(Z.shape[0]):
+            add = 0
+            for t in range(nt):
+                if tcz[t] != cz:
+                    continue
+                strip_term(i0, qbuf[sets[t, 0], : bb * m].reshape((bb, m)),
+                           qbuf[sets[t, 1], : bb * m].reshape((bb, m)),
+                           qbuf[sets[t, 2], : bb * m].reshape((bb, m)), c, pos, tbz[t], tbs[t],
+                           tkind[t], tpar[t], margin, rnd, outs[t], buf, scr, ph, add)
+                add = 1
+            square_fill(ph)
+            _nb_gemm(1.0, ph, False, Z[cz, i0:], False, 1.0, acc[cz, i0:i1])
+            if i1 < N:
+                _nb_gemm(1.0, ph[:, bb:], True, Z[cz, i0:i1], False, 1.0, acc[cz, i1:])
+    return 0
