@@ -209,10 +209,14 @@ def _sqdist(g, i0, i1, out):
 
 
 def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float,
-              rnd=(0.0, 0.0, 0.0), block: int | None = None) -> list:
+              rnd=(0.0, 0.0, 0.0), block: int | None = None, ws: dict | None = None) -> list:
     """The pair pass (compiled kernels; terms without a compiled kernel use the twin).
 
-    Same parameters and result as :func:`pair_pass_numpy`, to 1e-12 relative.
+    Same parameters and result as :func:`pair_pass_numpy`, to 1e-12 relative. ``ws``: a dict
+    the caller keeps from call to call (one per run), holding the scratch arrays – distance
+    and kernel blocks, accumulators, centred coordinates, several megabytes at ``N = 1000``
+    – for the next call instead of fresh ones (whose page faults cost about a tenth of a
+    step); the returned aggregates then live in it until the next call.
     """
     fast = [t for t in terms if t.kind]
     slow = [t for t in terms if not t.kind]
@@ -220,7 +224,8 @@ def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float
     field = None
     for part, fn in ((slow, pair_pass_numpy), (fast, _fast_pass)):
         if part:
-            aggs, f = fn(pts, c, part, bz, bs, margin, rnd, block)
+            aggs, f = (fn(pts, c, part, bz, bs, margin, rnd, block, ws) if fn is _fast_pass
+                       else fn(pts, c, part, bz, bs, margin, rnd, block))
             res.update({id(t): agg for t, agg in zip(part, aggs)})
             field = f if field is None else field + f
     if field is None:
@@ -256,15 +261,26 @@ class _Strips:
         return ("gram", self.Yc[s], self.nrm[s], self.R[s])
 
 
-def _prepare(pts, c, fast, bz, bs) -> _Strips:
+def _buf(ws, key, shape) -> np.ndarray:
+    """An uninitialized array of ``shape``: ``ws[key]`` when it has that shape, else fresh
+    (and kept in ``ws`` for the next call)."""
+    if ws is None:
+        return np.empty(shape)
+    a = ws.get(key)
+    if a is None or a.shape != shape:
+        a = ws[key] = np.empty(shape)
+    return a
+
+
+def _prepare(pts, c, fast, bz, bs, ws) -> _Strips:
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
     raw = tuple(np.ascontiguousarray(pts[nm], dtype=float) for nm in names)
     diff = k <= _SMALL_K
     YT = np.stack([Y.T for Y in raw]) if diff else np.empty((len(names), 0, 0))
-    Yc = np.empty((len(names), n, k) if not diff else (len(names), 0, 0))
-    nrm = np.empty((len(names), n) if not diff else (len(names), 0))
+    Yc = _buf(ws, "Yc", (len(names), n, k) if not diff else (len(names), 0, 0))
+    nrm = _buf(ws, "nrm", (len(names), n) if not diff else (len(names), 0))
     for s_, Y in enumerate(raw if not diff else ()):
         _dyn.centre_rows(Y, Yc[s_])
         _dyn.gram_rows(Yc[s_], Yc[s_], nrm[s_], False)
@@ -279,17 +295,23 @@ def _prepare(pts, c, fast, bz, bs) -> _Strips:
         np.array([t.params + (0.0,) * (5 - len(t.params)) for t in fast], dtype=float),
         np.stack(vz[0::2]), np.stack(vz[1::2]),
         np.array([cars.index(_names(t)[2]) for t in fast], dtype=np.int64),
-        np.stack([_dyn.zext_rows(z, c, np.empty((n, k + 1))) for z in cen]), cen)
+        _zext(cen, c, _buf(ws, "Z", (len(cen), n, k + 1))), cen)
 
 
-def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
+def _zext(cen: list, c: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    for cz, z in enumerate(cen):
+        _dyn.zext_rows(z, c, Z[cz])
+    return Z
+
+
+def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block, ws=None):
     """The compiled pass: strips dealt to the engine's threads (each with its own
     accumulators, summed at the end), BLAS single-threaded inside the region; each thread's
     share is one compiled call (:func:`_kernels.pass_strips`, no GIL) when numpy's BLAS
     symbols are found, else the same calls from a Python loop (:func:`_loop_share`)."""
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
-    sp = _prepare(pts, c, fast, bz, bs)
+    sp = _prepare(pts, c, fast, bz, bs, ws)
     # below a few hundred agents a thread hand-off costs more than the work it shares
     nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
     strips = _strips(n, block, k, nthreads)
@@ -298,47 +320,55 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
     groups = _balance(strips, n, nthreads)
     args = (sp, c, c > 0.0, float(margin), np.asarray(rnd, dtype=float), maxel)
     share = _compiled_share if _COMPILED else _loop_share
-    results = _parallel.run_parallel(lambda g, grp: share(grp, *args), groups)
+    results = _parallel.run_parallel(
+        lambda g, grp: share(grp, *args, _Scratch(ws, g, len(sp.kind), sp.Z.shape,
+                                                   len(sp.R), maxel)), groups)
     outs, acc = results[0]
     for o2, a2 in results[1:]:
         outs[:, :6] += o2[:, :6]
         outs[:, 7:] += o2[:, 7:]
         np.minimum(outs[:, 6], o2[:, 6], out=outs[:, 6])
         acc += a2
-    field = np.zeros((n, k))
+    field = _buf(ws, "field", (n, k))
     for cz, z in enumerate(sp.cen):
-        field += _dyn.pair_finish(acc[cz], z, np.empty((n, k)))
+        if cz == 0:
+            _dyn.pair_finish(acc[0], z, field)
+        else:
+            field += _dyn.pair_finish(acc[cz], z, _buf(ws, "fin", (n, k)))
     return [TermAgg(o) for o in outs], field
 
 
-def _new_outs(nt: int, n: int) -> np.ndarray:
-    outs = np.zeros((nt, len(_ROWS), n))
-    outs[:, 6] = np.inf
-    return outs
+class _Scratch:
+    """One thread's arrays of a pass (from ``ws`` when given): ``outs (T, 9, N)`` (zero,
+    row 6 at ``+inf``), ``acc (C, N, k+1)``, the distance blocks ``q (sets, maxel)``, the
+    kernel block ``ph``, the kernels' row buffers ``buf (10, N)``, ``scr (3, N)``."""
+
+    def __init__(self, ws, g, nt, zshape, nsets, maxel):
+        n = zshape[1]
+        self.outs = _buf(ws, ("outs", g), (nt, len(_ROWS), n))
+        self.outs.fill(0.0)
+        self.outs[:, 6] = np.inf
+        self.acc = _buf(ws, ("acc", g), zshape)
+        self.q = _buf(ws, ("q", g), (nsets, maxel))
+        self.ph = _buf(ws, ("ph", g), (maxel,))
+        self.buf = _buf(ws, ("buf", g), (10, n))
+        self.scr = _buf(ws, ("scr", g), (3, n))
 
 
-def _compiled_share(grp, sp, c, pos, margin, rnd, maxel):
+def _compiled_share(grp, sp, c, pos, margin, rnd, maxel, w):
     """One thread's strips ``grp`` in one compiled call: ``(outs, acc)``."""
-    n, k1 = sp.Z.shape[1:]
-    outs = _new_outs(len(sp.kind), n)
-    acc = np.empty(sp.Z.shape)
     _kernels.pass_strips(np.array(grp, dtype=np.int64).reshape(-1, 2), sp.diff, sp.YT, sp.Yc,
-                         sp.nrm, sp.R, _dyn.tau_for(k1 - 1), sp.sets, sp.kind, sp.par, sp.bz,
-                         sp.bs, sp.tcz, c, pos, margin, rnd, sp.Z, acc, outs,
-                         np.empty((len(sp.R), maxel)), np.empty(maxel), np.empty((10, n)),
-                         np.empty((3, n)))
-    return outs, acc
+                         sp.nrm, sp.R, _dyn.tau_for(sp.Z.shape[2] - 1), sp.sets, sp.kind,
+                         sp.par, sp.bz, sp.bs, sp.tcz, c, pos, margin, rnd, sp.Z, w.acc, w.outs,
+                         w.q, w.ph, w.buf, w.scr)
+    return w.outs, w.acc
 
 
-def _loop_share(grp, sp, c, pos, margin, rnd, maxel):
+def _loop_share(grp, sp, c, pos, margin, rnd, maxel, w):
     """Twin of :func:`_compiled_share`: the same calls, strip by strip from Python."""
     n = c.shape[0]
-    q = np.empty((len(sp.R), maxel))
-    ph = np.empty(maxel)
-    buf = np.empty((10, n))
-    scr = np.empty((3, n))
-    outs = _new_outs(len(sp.kind), n)
-    acc = np.zeros(sp.Z.shape)
+    q, ph, buf, scr, outs, acc = w.q, w.ph, w.buf, w.scr, w.outs, w.acc
+    acc.fill(0.0)
     for i0, i1 in grp:
         shape = (i1 - i0, n - i0)
         size = shape[0] * shape[1]

@@ -226,6 +226,7 @@ class CertificateObserver:
                                         "error_v", "bound_v")}
         self.kept = {key: [] for key, on in self.keep.items() if on}
         self.tracker = PaperTracker(scene, P, self.plan, self.w) if self.paper else None
+        self._ws = {}                           # the pair pass's scratch arrays, step to step
         self._step = 0
         if self._saving(0):
             self._record(self.t0, state)
@@ -323,8 +324,9 @@ class CertificateObserver:
             return [], np.zeros_like(PV)
         bz = {"x": self.fx, "v": self.bv}
         bs = {"x": self.fx, "v": self.fv}
-        return fn(pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
-                  _ro.pass_constants(self.n, self.mixed))
+        args = (pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
+                _ro.pass_constants(self.n, self.mixed))
+        return fn(*args, ws=self._ws) if fn is pair_pass else fn(*args)
 
     def _local_field(self, F, PX, PV, t) -> np.ndarray:
         """``F′(PX, PV)`` from its pair sums ``F``: the projected scene's per-agent effects
