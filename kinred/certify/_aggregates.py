@@ -116,7 +116,7 @@ def _rounding(term, r, lam, rnd):
 
 
 def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float,
-                    rnd=(0.0, 0.0, 0.0), block: int | None = None) -> list:
+                    rnd=(0.0, 0.0, 0.0), block: int | None = None, ws=None) -> list:
     """Plain-numpy twin of :func:`pair_pass` (any kernel with ``slope_bound``).
 
     Parameters
@@ -135,6 +135,8 @@ def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin:
         ``(g, a_e, a_s)`` of the rounding scales (:func:`kinred.certify._roundoff.pass_constants`).
     block : int, optional
         Rows per block (default: about 65k entries per block).
+    ws : dict, optional
+        Ignored here (:func:`pair_pass` keeps its scratch arrays in it).
 
     Returns
     -------
@@ -224,8 +226,7 @@ def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float
     field = None
     for part, fn in ((slow, pair_pass_numpy), (fast, _fast_pass)):
         if part:
-            aggs, f = (fn(pts, c, part, bz, bs, margin, rnd, block, ws) if fn is _fast_pass
-                       else fn(pts, c, part, bz, bs, margin, rnd, block))
+            aggs, f = fn(pts, c, part, bz, bs, margin, rnd, block, ws)
             res.update({id(t): agg for t, agg in zip(part, aggs)})
             field = f if field is None else field + f
     if field is None:
@@ -273,6 +274,7 @@ def _buf(ws, key, shape) -> np.ndarray:
 
 
 def _prepare(pts, c, fast, bz, bs, ws) -> _Strips:
+    """The :class:`_Strips` of the compiled terms ``fast`` (arrays from ``ws`` when given)."""
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
@@ -299,6 +301,7 @@ def _prepare(pts, c, fast, bz, bs, ws) -> _Strips:
 
 
 def _zext(cen: list, c: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """``Z[cz] = [c z̃, c]`` per centred carrier ``z̃`` (the engine's operand)."""
     for cz, z in enumerate(cen):
         _dyn.zext_rows(z, c, Z[cz])
     return Z

@@ -326,7 +326,7 @@ class CertificateObserver:
         bs = {"x": self.fx, "v": self.fv}
         args = (pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
                 _ro.pass_constants(self.n, self.mixed))
-        return fn(*args, ws=self._ws) if fn is pair_pass else fn(*args)
+        return fn(*args, ws=self._ws)
 
     def _local_field(self, F, PX, PV, t) -> np.ndarray:
         """``F′(PX, PV)`` from its pair sums ``F``: the projected scene's per-agent effects
