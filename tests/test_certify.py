@@ -7,15 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinred.certify import Certificate, CertificateObserver, StepState, certify
+from kinred.certify import Certificate, CertificateObserver, certify
 from kinred.certify import _aggregates, _roundoff
-from kinred.certify._certify import _lockstep
 from kinred.certify._plan import make_plan
 from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
                              Field, Morse, Noise, PairwiseEffect, Quadratic, Scene, SelfPropulsion,
                              project_state)
-from kinred.errors import InvalidInput, KinredError, NotProjectable
-from kinred.integrate import SaveAt, simulate
+from kinred.errors import InvalidInput, KinredError, NotProjectable, SimulationDiverged
+from kinred.integrate import SaveAt, StepState, simulate
 
 
 def _jl(k, d, seed):
@@ -88,14 +87,143 @@ def _pass_inputs(N, k, seed, weights=True):
 def test_compiled_pair_pass_equals_numpy_twin(N, k):
     pts, c, terms, bz, bs = _pass_inputs(N, k, N + k)
     rnd = (3e-14, 4e-15, 1e-12)
-    fast = _aggregates.pair_pass(pts, c, terms, bz, bs, 1e-9, rnd)
-    ref = _aggregates.pair_pass_numpy(pts, c, terms, bz, bs, 1e-9, rnd)
+    fast, ffast = _aggregates.pair_pass(pts, c, terms, bz, bs, 1e-9, rnd)
+    ref, fref = _aggregates.pair_pass_numpy(pts, c, terms, bz, bs, 1e-9, rnd)
+    assert np.max(np.abs(ffast - fref)) <= 1e-12 * np.max(np.abs(fref))
     for a, b in zip(fast, ref):
         A, B = a.stack(), b.stack()
         fin = np.isfinite(B)
         assert np.array_equal(np.isfinite(A), fin)
         scale = np.maximum(np.abs(B[fin]), 1e-300)
         assert np.max(np.abs(A[fin] - B[fin]) / scale) < 1e-12
+
+
+@pytest.mark.parametrize("N,k", [(60, 2), (90, 10), (420, 6), (450, 40)])
+def test_compiled_strip_worker_equals_the_python_strip_loop(N, k, monkeypatch):
+    """A thread's share of the pass as one compiled call (no GIL) makes the same calls as
+    the Python strip loop: identical aggregates and defect field, one or two threads."""
+    from kinred.dynamics import set_num_threads, get_num_threads
+
+    pts, c, terms, bz, bs = _pass_inputs(N, k, 3 * N + k)
+    fast = [t for t in terms if t.kind]
+    rnd = (3e-14, 4e-15, 1e-12)
+    before = get_num_threads()
+    try:
+        for threads in (1, 2):
+            set_num_threads(threads)
+            monkeypatch.setattr(_aggregates, "_COMPILED", True)
+            a, fa = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+            monkeypatch.setattr(_aggregates, "_COMPILED", False)
+            b, fb = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+            assert np.array_equal(fa, fb)
+            for x, y in zip(a, b):
+                assert np.array_equal(x.stack(), y.stack())
+    finally:
+        set_num_threads(before)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_pass_scratch_is_reused_from_call_to_call(compiled, monkeypatch):
+    """With a workspace kept by the caller, the second pass allocates no new scratch arrays
+    (no fresh pages every step) and gives the same numbers as fresh arrays, on new inputs."""
+    from kinred.dynamics import set_num_threads, get_num_threads
+
+    monkeypatch.setattr(_aggregates, "_COMPILED", compiled)
+    rnd = (3e-14, 4e-15, 1e-12)
+    before = get_num_threads()
+    try:
+        set_num_threads(2)
+        ws, ids = {}, []
+        for seed in (1, 2):
+            pts, c, terms, bz, bs = _pass_inputs(450, 12, seed)
+            fast = [t for t in terms if t.kind]
+            a, fa = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd, ws=ws)
+            a, fa = [x.stack() for x in a], fa.copy()
+            ids.append({key: id(v) for key, v in ws.items()})
+            b, fb = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+            assert np.array_equal(fa, fb)
+            assert all(np.array_equal(x, y.stack()) for x, y in zip(a, b))
+        assert len(ids[0]) >= 8 and ids[0] == ids[1]
+    finally:
+        set_num_threads(before)
+
+
+class _Gauss:
+    """A kernel without compiled form: exp(-s²), |φ'| ≤ √2 e^(-1/2) < 0.86."""
+
+    def __call__(self, s):
+        return np.exp(-np.asarray(s) ** 2)
+
+    def slope_bound(self, lo, hi):
+        return np.full(np.broadcast(lo, hi).shape, 0.86)
+
+
+@pytest.mark.parametrize("N,k,engine", [(60, 2, "fast"), (70, 3, "numpy"), (90, 10, "fast"),
+                                        (420, 40, "fast"), (50, 7, "numpy")])
+def test_fused_defect_field_equals_the_engines(N, k, engine):
+    """The defect's F'(Mx, Mv), from the certificate's own pair pass plus the per-agent
+    effects, equals the projected scene's own field there to 1e-13 relative (every term
+    kind, both carriers, weights, self-propulsion and a drift; a far-away cloud)."""
+    rng = np.random.default_rng(N + k)
+    d = k + 5
+    w = rng.random(N)
+    w[0] = 0.0
+    w /= w.sum()
+    sc = Scene([Alignment(CuckerSmale(0.8, 1.62)), Alignment(CuckerSmale(1.0, 1.5), on="v"),
+                AttractionRepulsion(Morse(1.0, 2.0, 1.5, 0.5, soft=0.3)),
+                Alignment(Quadratic(-0.3)), SelfPropulsion(0.7, 0.2),
+                PairwiseEffect(Morse(0.5, 1.0, 1.0, 0.5, soft=0.2), source="v", carrier="v"),
+                PairwiseEffect(_Gauss(), source="x", carrier="x"),
+                Drift(np.linspace(-1.0, 1.0, d))], normalize="sum", weights=w)
+    x0 = rng.normal(size=(N, d)) + 40.0
+    v0 = rng.normal(size=(N, d))
+    M = _jl(k, d, N)
+    obs = CertificateObserver(sc, M, x0, v0, engine=engine, paper=False)
+    simulate(sc, x0, v0, (0.0, 0.02), 0.02, observers=[obs])    # one step: bounds > 0
+    PX, PV = obs.PX, obs.PV
+    _, F = obs._pass(PX, PV, obs.Y, obs.W)
+    F = obs._local_field(F, PX, PV, 0.3)
+    ref = obs.pscene._rhs(PX, PV, 0.3)[1]
+    assert np.max(np.abs(F - ref)) <= 1e-13 * np.max(np.abs(ref))
+    assert obs.plan.terms[-1].kind == 0                       # the numpy path is in the mix
+
+
+def test_certificate_adds_one_pair_pass_and_two_projections_per_step(monkeypatch):
+    """Issue 16's cost: per step, besides the two runs' own fields (one evaluation each), the
+    certificate makes one pair pass (the defect's F'(Mx, Mv) inside it, no engine call) and
+    two projections (M x, M v of the new state, reused as the next step's start)."""
+    from kinred.certify import _observer
+    from kinred.projection import as_projection
+
+    rng = np.random.default_rng(21)
+    N, d, k, n = 40, 12, 3, 7
+    x0, v0 = rng.normal(size=(N, d)), rng.normal(size=(N, d))
+    scene = Scene([Alignment(CuckerSmale(1.0, 1.5)), SelfPropulsion(0.5, 0.1)])
+    P = as_projection(_jl(k, d, 3))
+    calls = {"rhs": [], "pass": 0, "apply": 0}
+    rhs, pp, apply = Scene._rhs, _observer.pair_pass, P.apply
+
+    def count_rhs(self, x, v, t, rng=None):
+        calls["rhs"].append(x.shape[1])
+        return rhs(self, x, v, t, rng)
+
+    def count_pass(*a, **kw):
+        calls["pass"] += 1
+        return pp(*a, **kw)
+
+    def count_apply(X):
+        calls["apply"] += 1
+        return apply(X)
+
+    monkeypatch.setattr(Scene, "_rhs", count_rhs)
+    monkeypatch.setattr(_observer, "pair_pass", count_pass)
+    monkeypatch.setattr(P, "apply", count_apply)
+    certify(scene, P, x0, v0, t_span=(0.0, n * 0.05), dt=0.05, save=SaveAt(every=n),
+            paper=False)
+    assert sorted(calls["rhs"]) == [k] * n + [d] * n          # one field per run and step
+    assert calls["pass"] == n
+    # + at t0: M x0, M v0 (the projected run), M x(0), M v(0) (working frame), M c (its shift)
+    assert calls["apply"] == 2 * n + 5
 
 
 def test_spectral_gap_bound_against_dense_eigenvalues():
@@ -113,7 +241,7 @@ def test_spectral_gap_bound_against_dense_eigenvalues():
         c = sc.coefficients(N)
         pts = {"PX": Y, "Y": Y, "PV": Y, "W": Y}
         agg = _aggregates.pair_pass(pts, c, make_plan(sc, N).terms, {"x": w, "v": w},
-                                    {"x": w, "v": w}, 0.0)[0]
+                                    {"x": w, "v": w}, 0.0)[0][0]
         bound = kappa * float(w @ np.where(np.isfinite(agg.rowmin), agg.rowmin, 0.0))
         D = np.sqrt(((Y[:, None] - Y[None]) ** 2).sum(-1))
         A = c[None, :] * g(D)
@@ -136,7 +264,7 @@ def test_row_spread_bound_cauchy_schwarz():
     pts, c, terms, bz, bs = _pass_inputs(N, k, 9)
     w = c / c.sum()
     kappa = float(N)
-    agg = _aggregates.pair_pass(pts, c, terms[:1], bz, bs, 0.0)[0]
+    agg = _aggregates.pair_pass(pts, c, terms[:1], bz, bs, 0.0)[0][0]
     kstd = np.sqrt(np.maximum(kappa * agg.s2 - agg.dsum ** 2, 0.0))
     D = np.sqrt(((pts["Y"][:, None] - pts["Y"][None]) ** 2).sum(-1))
     A = c[None, :] * terms[0].kernel(D)
@@ -149,17 +277,19 @@ def test_row_spread_bound_cauchy_schwarz():
         assert np.all(lhs <= kstd * nrm * (1 + 1e-10) + 1e-14)
 
 
-# ---------------------------------------------------------------------------- lockstep identity
+# ---------------------------------------------------------------------------- simulate's loop
 class _Capture:
-    def __init__(self):
-        self.x = []
+    """Records the certificate observer's projected run after each of its steps."""
 
-    def init(self, t0, state, x0, v0):
-        self(t0, state, None)
+    def __init__(self, obs):
+        self.obs, self.y = obs, []
 
-    def __call__(self, t, state, scene):
-        self.x.append((state.x + state.shift if state.shift is not None else state.x.copy(),
-                       state.v.copy()))
+    def init(self, t0, state, scene):
+        self.update(t0, state, scene)
+
+    def update(self, t, state, scene):
+        o = self.obs
+        self.y.append((o.Y + o.shift_y if o.shift_y is not None else o.Y.copy(), o.W.copy()))
 
 
 @pytest.mark.parametrize("effects", [
@@ -167,23 +297,59 @@ class _Capture:
     [SelfPropulsion(1.0, 0.5), AttractionRepulsion(Morse(1.0, 2.0, 1.5, 0.5, soft=0.3)),
      Drift([0.5, -1.0, 0.2, 0.0])],
 ])
-def test_lockstep_runs_are_bit_identical_to_simulate(effects):
+def test_observed_runs_are_bit_identical_to_simulate(effects):
+    """The observer leaves simulate's run unchanged, and its projected run is simulate's run
+    of the projected scene, bit for bit at every step."""
     rng = np.random.default_rng(5)
     N, d, k, dt, n = 30, 4, 2, 0.05, 12
     x0, v0 = rng.normal(size=(N, d)) + 50.0, rng.normal(size=(N, d))
     scene = Scene(effects, normalize="mean", weights=rng.dirichlet(np.ones(N)))
-    cap = _Capture()
-    _lockstep(scene, x0, v0, 0.0, dt, n, cap)
-    tr = simulate(scene, x0, v0, (0.0, n * dt), dt, save=SaveAt(every=1, states=True))
-    for j, (xs, vs) in enumerate(cap.x):
-        assert np.array_equal(xs, tr.x[j]) and np.array_equal(vs, tr.v[j])
     M = _jl(k, d, 6)
-    obs = CertificateObserver(scene, M, paper=False)
-    _lockstep(scene, x0, v0, 0.0, dt, n, obs)
-    ps = scene.project(M)
-    y0, w0 = project_state(M, x0, v0)
-    tp = simulate(ps, y0, w0, (0.0, n * dt), dt, save=SaveAt(every=n, states=True))
-    assert np.array_equal(obs.Y + obs.shift_y, tp.x[-1]) and np.array_equal(obs.W, tp.v[-1])
+    obs = CertificateObserver(scene, M, x0, v0, paper=False, states=True)
+    cap = _Capture(obs)
+    save = SaveAt(every=1, states=True)
+    tr = simulate(scene, x0, v0, (0.0, n * dt), dt, save=save, observers=[obs, cap])
+    plain = simulate(scene, x0, v0, (0.0, n * dt), dt, save=save)
+    assert np.array_equal(tr.x, plain.x) and np.array_equal(tr.v, plain.v)
+    tp = simulate(scene.project(M), *project_state(M, x0, v0), (0.0, n * dt), dt, save=save)
+    assert len(cap.y) == n + 1
+    for j, (ys, ws) in enumerate(cap.y):
+        assert np.array_equal(ys, tp.x[j]) and np.array_equal(ws, tp.v[j])
+    rec = obs.records()
+    assert np.array_equal(rec["step"], np.arange(n + 1))
+    assert np.array_equal(rec["y"], tp.x) and np.array_equal(rec["w"], tp.v)   # kept states
+    c = certify(scene, M, x0, v0, t_span=(0.0, n * dt), dt=dt, paper=False)
+    for key in ("error", "bound", "error_max", "bound_max", "w1_bound"):
+        assert np.array_equal(getattr(c, key), rec[key])
+
+
+def test_observer_refuses_other_methods_and_steps():
+    """Only fixed-step forward Euler is certified: simulate refuses other methods before the
+    first step; steps of changing size, skipped steps or another run are refused."""
+    rng = np.random.default_rng(18)
+    x0, v0 = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
+    scene = Scene([Alignment()])
+    obs = CertificateObserver(scene, _jl(2, 3, 2), x0, v0)
+    assert obs.methods == ("euler",)
+    for method in ("rk4", "heun", "rk45"):
+        with pytest.raises(InvalidInput, match=r"valid only for method in \('euler',\)"):
+            simulate(scene, x0, v0, (0, 1), 0.1, method=method, observers=[obs])
+        assert not hasattr(obs, "rec")                        # init never ran
+    view = lambda t, step, h, x=x0, v=v0: StepState(t, x, v, None, step, h)  # noqa: E731
+    obs.init(0.0, view(0.0, 0, 0.0), scene)
+    obs.update(0.1, view(0.1, 1, 0.1), scene)
+    with pytest.raises(InvalidInput, match="fixed step only"):
+        obs.update(0.3, view(0.3, 2, 0.2), scene)             # an adaptive step
+    with pytest.raises(InvalidInput, match="every accepted step"):
+        obs.update(0.3, view(0.3, 3, 0.1), scene)
+    with pytest.raises(InvalidInput, match="another scene"):
+        obs.update(0.2, view(0.2, 2, 0.1), Scene([Alignment()]))
+    with pytest.raises(InvalidInput, match="shape"):
+        obs.update(0.2, view(0.2, 2, 0.1, x0[:3], v0[:3]), scene)
+    with pytest.raises(InvalidInput, match="v0"):
+        CertificateObserver(scene, _jl(2, 3, 2), x0, None)
+    with pytest.raises(InvalidInput, match="states"):
+        CertificateObserver(scene, _jl(2, 3, 2), x0, v0, states="xv")
 
 
 # ---------------------------------------------------------------------------- validity
@@ -244,7 +410,14 @@ def _cases(draw, family):
 
 def _check_valid(case):
     scene, M, x0, v0, dt, steps, engine = case
-    c = certify(scene, M, x0, v0, t_span=(0.0, steps * dt), dt=dt, engine=engine, paper=False)
+    try:
+        c = certify(scene, M, x0, v0, t_span=(0.0, steps * dt), dt=dt, engine=engine,
+                    paper=False)
+    except SimulationDiverged:
+        # certify is simulate's run: it stops where simulate stops (an unstable Euler step)
+        with pytest.raises(SimulationDiverged):
+            simulate(scene, x0, v0, (0.0, steps * dt), dt)
+        return
     assert c.valid(), (scene, c.error, c.bound, c.error_max, c.bound_max)
     assert np.all(c.w1_bound >= c.w1_coupling)
     assert np.all(c.w1_coupling <= c.error * (1 + 1e-12) + 1e-300)      # Jensen
@@ -285,6 +458,10 @@ def test_first_step_bound_is_the_defect():
                 t_span=(0, 0.05), dt=0.05)
     assert c.error[1] > 1e-4
     assert 1.0 <= c.bound[1] / c.error[1] < 1.0 + 1e-9
+    # the velocities carry the whole error after one step (e¹ = −τₓ⁰ is round-off)
+    assert c.error_v[1] == pytest.approx(c.error[1], rel=1e-9)
+    assert 1.0 <= c.bound_v[1] / c.error_v[1] < 1.0 + 1e-9
+    assert c.labels["bound_v"] == "certified bound" and c.labels["error_v"] == "measured"
 
 
 # ---------------------------------------------------------------------------- tightness
@@ -433,17 +610,6 @@ def test_uncovered_scenes_are_refused_before_work(effects, exc, match):
         certify(scene, _jl(2, 3, 1), x0, v0 if v0 is not None else np.zeros((5, 3)),
                 t_span=(0, 1), dt=0.1)
     assert isinstance(info.value, KinredError)
-
-
-def test_observer_must_see_every_step():
-    rng = np.random.default_rng(18)
-    x0, v0 = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
-    obs = CertificateObserver(Scene([Alignment()]), _jl(2, 3, 2))
-    state = StepState(x0.copy(), v0.copy(), None, 0, 0.1)
-    obs.init(0.0, state, x0, v0)
-    state.step = 2
-    with pytest.raises(InvalidInput, match="every accepted step"):
-        obs(0.2, state, None)
 
 
 def test_roundoff_helpers():

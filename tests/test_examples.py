@@ -34,6 +34,14 @@ EXPECTED = {
     "recovery_l1.py": [r"^\s+3\s+60\s+\S+\s+20/20", r"^done"],
     "ensemble_dask.py": [r"identical: True"],
     "flocking_projected.py": [r"^\s+full\s+\S+\s+pos", r"^\s+20\s+\S+\s+pos", r"^done"],
+    "certify_projection.py": [
+        r"error \(measured\)\s+bound \(certified bound\)\s+ratio",
+        # at T = 3: error and bound of the same size, ratio in [1, 1.5) (measured 1.13)
+        r"^\s+3\.00\s+\d\.\d{3}e-0[12]\s+\d\.\d{3}e-0[12]\s+1\.[0-4]\d\s+\d\.\d{3}e\+\d+$",
+        r"^valid: True; worst ratio over t >= 1: 1\.[0-4]\d \(max over agents: 1\.[0-4]\d\)",
+        r"^figure: certify_projection\.png",
+        r"^done",
+    ],
 }
 
 

@@ -7,6 +7,7 @@ import pytest
 
 from kinred.cli import main
 from kinred.errors import InvalidInput
+from kinred.experiments import fig4
 from kinred.experiments.fig4 import Fig4Config, _relative, strategies
 from kinred.report import validate_report_html
 
@@ -34,6 +35,37 @@ def test_projection_error_grows_as_k_falls_and_far_below_exponential(quick):
         assert np.all(inc[1:] <= inc[:-1] * (1 + 1e-9)), k
         assert errs[k][-1] < 2 * errs[k][len(t) // 2], k
     assert errs[ks[0]].max() < 0.15  # the paper: ~14 % at its smallest k
+
+
+def test_certified_bound_covers_the_projection_error(quick):
+    """Left panel: each curve's certified bound (relative in the same way) is above the
+    measured error at every saved time and within a factor 10 of it for t >= 1."""
+    _, res = quick
+    t = np.array(res["t"])
+    assert set(res["projection_bound"]) == set(res["projection_error"])
+    for k, e in res["projection_error"].items():
+        e, b = np.array(e), np.array(res["projection_bound"][k])
+        assert np.all(b >= e), k
+        assert np.max(b[t >= 1] / e[t >= 1]) <= 10.0, k
+        assert np.max(b[t >= 1] / e[t >= 1]) <= 2.0, k      # measured 1.27-1.50 (quick)
+        assert b[0] < 1e-12                                  # round-off only at t = 0
+
+
+def test_measured_curves_are_those_of_plain_projected_runs():
+    """Stepping the projected runs inside the certificate observers leaves the measured
+    curves bit-identical to simulating each projected scene on its own."""
+    cfg = Fig4Config.quick(N=30, d=40, steps=100, record_every=20, ks=(4, 12))
+    rng = np.random.default_rng(1)
+    x0, v0 = rng.standard_normal((30, 40)), rng.standard_normal((30, 40))
+    scene = fig4._scene(cfg)
+    full, err, bound = fig4._left_panel(scene, x0, v0, cfg)
+    plain = fig4._simulate(scene, x0, v0, cfg, states=True)
+    assert np.array_equal(full.v, plain.v)
+    for k in cfg.ks:
+        (M,), (w,) = fig4._projected_runs(scene, x0, v0, cfg, k, 1, 1)
+        Mv = np.einsum("tnd,kd->tnk", plain.v, M.to_dense())
+        assert np.array_equal(err[k], _relative(w, Mv))
+        assert np.all(bound[k] >= err[k]) and np.all(bound[k][1:] <= 3 * err[k][1:])
 
 
 def test_recovery_error_decreases_as_L_grows(quick):

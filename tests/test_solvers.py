@@ -443,3 +443,30 @@ def test_controller_objects_validate():
     # step-to-hit: a step that would pass the next save time ends on it
     assert run.propose(0.0, 0, 0.004, None) == (0.004, 0.004, True)
     assert run.propose(0.0, 0, 0.5, None) == (0.01, 0.01, False)
+
+
+def test_observer_methods_declaration_refuses_other_integrators_before_work():
+    """An observer with a ``methods`` attribute runs only with those integrators: any other
+    method is refused before the first evaluation (init never called)."""
+    calls = []
+
+    class EulerOnly:
+        methods = ("euler",)
+
+        def init(self, t0, state, scene):
+            calls.append("init")
+
+        def update(self, t, state, scene):
+            calls.append(state.step)
+
+    sc = Scene([Alignment()])
+    x0, v0 = np.zeros((3, 2)), np.eye(3)[:, :2]
+    simulate(sc, x0, v0, (0, 0.2), 0.1, observers=EulerOnly())
+    assert calls == ["init", 1, 2]
+    for method in ("rk4", "rk45", "euler_maruyama"):
+        calls.clear()
+        with pytest.raises(InvalidInput, match=r"observers\[1\] .* valid only for method in "
+                                               r"\('euler',\); got method='" + method):
+            simulate(sc, x0, v0, (0, 0.2), 0.1, method=method,
+                     observers=[lambda t, s, scene: calls.append(t), EulerOnly()])
+        assert calls == []

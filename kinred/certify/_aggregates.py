@@ -1,5 +1,12 @@
 r"""The certificate's pair pass: every per-pair quantity of one step in one blocked pass.
 
+Besides the per-agent aggregates below, the pass returns the pair sums of the projected field
+at the projected high-dimensional state, ``Σ_terms Σⱼ cⱼ φ(ρᵢⱼ)(Mzⱼ − Mzᵢ)`` (the defect
+``τᵥ`` needs ``F′(Mx, Mv)``): it already has the distances ``ρ`` and the kernel values there,
+so the defect costs the two BLAS products of the dense engine per strip
+(``Φ Z`` with ``Z = [c z̃, c]``, ``z̃`` the carrier centred as the engine does, and the
+transposed product for the columns beyond the strip) instead of a second engine call.
+
 For each pairwise term (kernel ``φ``, source ``s``, carrier ``z``) and each agent ``i`` the
 pass returns, with ``r′ᵢⱼ`` the source distance in the projected run, ``ρᵢⱼ`` the source
 distance of the projected high-dimensional state ``(Mx, Mv)`` and
@@ -22,19 +29,26 @@ distance of the projected high-dimensional state ``(Mx, Mv)`` and
 Two implementations: :func:`pair_pass` (row strips of the upper triangle as in the dynamics
 engine, squared distances by differences for ``k ≤ 3`` and BLAS Gram blocks of centred
 coordinates with the engine's close-pair fix-up otherwise, the per-pair work in the numba
-kernel :func:`kinred.certify._kernels.strip_term`; memory ``O(N·block)``) and its plain-numpy
+kernel :func:`kinred.certify._kernels.strip_term`; memory ``O(N·block)``; each engine thread's
+strips in one compiled call without the GIL, :func:`kinred.certify._kernels.pass_strips`, or
+the same calls from a Python loop when numpy's BLAS symbols are not found) and its plain-numpy
 twin :func:`pair_pass_numpy` (full rows, distances by differences, the kernels' own
 ``__call__`` and ``slope_bound``), which also serves kernels without a compiled form.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..pairsum import _kernels as _dyn
 from .. import _parallel
-from ..pairsum.dense import SMALL_K as _SMALL_K, strips as _strips
+from ..pairsum.dense import SMALL_K as _SMALL_K, _balance, _pair_products, strips as _strips
 from . import _kernels
+
+#: Whether a thread's share of the pass runs as one compiled call (numpy's BLAS symbols found).
+_COMPILED = bool(_dyn.HAVE_COMPILED_FOR[np.dtype(np.float64)])
 
 __all__ = ["TermAgg", "pair_pass", "pair_pass_numpy"]
 
@@ -102,7 +116,7 @@ def _rounding(term, r, lam, rnd):
 
 
 def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float,
-                    rnd=(0.0, 0.0, 0.0), block: int | None = None) -> list:
+                    rnd=(0.0, 0.0, 0.0), block: int | None = None, ws=None) -> list:
     """Plain-numpy twin of :func:`pair_pass` (any kernel with ``slope_bound``).
 
     Parameters
@@ -121,15 +135,22 @@ def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin:
         ``(g, a_e, a_s)`` of the rounding scales (:func:`kinred.certify._roundoff.pass_constants`).
     block : int, optional
         Rows per block (default: about 65k entries per block).
+    ws : dict, optional
+        Ignored here (:func:`pair_pass` keeps its scratch arrays in it).
 
     Returns
     -------
-    list of TermAgg
+    aggs : list of TermAgg
+    field : (N, k) ndarray
+        ``Σ_terms Σⱼ cⱼ φ(ρᵢⱼ)(Mzⱼ − Mzᵢ)``, the pair sums of the projected field at
+        ``(PX, PV)``.
     """
     n = c.shape[0]
     pos = c > 0.0
     B = block or max(1, 65_536 // max(n, 1))
     outs = [_new_out(n) for _ in terms]
+    cen = {nm: pts[nm] - pts[nm].mean(axis=0) for nm in {_names(t)[2] for t in terms}}
+    field = np.zeros((n, next(iter(pts.values())).shape[1]))
     for i0 in range(0, n, B):
         i1 = min(n, i0 + B)
         dist = {}
@@ -161,7 +182,9 @@ def pair_pass_numpy(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin:
             o[8, i0:i1] = np.sum(cj * _rounding(term, rr, lam, rnd), axis=1)
             o[6, i0:i1] = np.min(np.where(partner, np.maximum(phi, 0.0), np.inf), axis=1)
             o[7, i0:i1] = np.sum(cj * phi * phi, axis=1)
-    return [TermAgg(o) for o in outs]
+            a = cj * np.asarray(term.kernel(rho), dtype=float)
+            field[i0:i1] += a @ cen[car] - np.sum(a, axis=1)[:, None] * cen[car][i0:i1]
+    return [TermAgg(o) for o in outs], field
 
 
 def _geometry(pts: dict, names) -> dict:
@@ -188,69 +211,180 @@ def _sqdist(g, i0, i1, out):
 
 
 def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float,
-              rnd=(0.0, 0.0, 0.0), block: int | None = None) -> list:
+              rnd=(0.0, 0.0, 0.0), block: int | None = None, ws: dict | None = None) -> list:
     """The pair pass (compiled kernels; terms without a compiled kernel use the twin).
 
-    Same parameters and result as :func:`pair_pass_numpy`, to 1e-12 relative.
+    Same parameters and result as :func:`pair_pass_numpy`, to 1e-12 relative. ``ws``: a dict
+    the caller keeps from call to call (one per run), holding the scratch arrays – distance
+    and kernel blocks, accumulators, centred coordinates, several megabytes at ``N = 1000``
+    – for the next call instead of fresh ones (whose page faults cost about a tenth of a
+    step); the returned aggregates then live in it until the next call.
     """
     fast = [t for t in terms if t.kind]
     slow = [t for t in terms if not t.kind]
     res = {}
-    if slow:
-        for t, agg in zip(slow, pair_pass_numpy(pts, c, slow, bz, bs, margin, rnd, block)):
-            res[id(t)] = agg
-    if fast:
-        for t, agg in zip(fast, _fast_pass(pts, c, fast, bz, bs, margin, rnd, block)):
-            res[id(t)] = agg
-    return [res[id(t)] for t in terms]
+    field = None
+    for part, fn in ((slow, pair_pass_numpy), (fast, _fast_pass)):
+        if part:
+            aggs, f = fn(pts, c, part, bz, bs, margin, rnd, block, ws)
+            res.update({id(t): agg for t, agg in zip(part, aggs)})
+            field = f if field is None else field + f
+    if field is None:
+        field = np.zeros((c.shape[0], next(iter(pts.values())).shape[1]))
+    return [res[id(t)] for t in terms], field
 
 
-def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block):
-    """The compiled pass: strips dealt to the engine's threads (each with its own
-    accumulators, summed at the end), BLAS single-threaded inside the region."""
+@dataclass
+class _Strips:
+    """The compiled pass's inputs, built once per pass: the point sets' geometry, stacked
+    (``YT (S, k, N)`` transposed rows for ``k ≤ 3``; else ``Yc (S, N, k)`` centred rows,
+    ``nrm (S, N)`` their squared norms and ``R`` the raw rows, a tuple), the per-term arrays
+    and, per carrier, ``Z = [c z̃, c]`` (``(C, N, k+1)``) and the centred ``z̃``."""
+
+    diff: bool
+    YT: np.ndarray
+    Yc: np.ndarray
+    nrm: np.ndarray
+    R: tuple
+    sets: np.ndarray       # (T, 3): run, true and carrier point-set indices of each term
+    kind: np.ndarray
+    par: np.ndarray        # (T, 5)
+    bz: np.ndarray         # (T, N)
+    bs: np.ndarray         # (T, N)
+    tcz: np.ndarray        # (T,) carrier index of each term
+    Z: np.ndarray
+    cen: list
+
+    def geo(self, s: int) -> tuple:
+        """Point set ``s`` as :func:`_sqdist` takes it."""
+        if self.diff:
+            return ("diff", self.YT[s])
+        return ("gram", self.Yc[s], self.nrm[s], self.R[s])
+
+
+def _buf(ws, key, shape) -> np.ndarray:
+    """An uninitialized array of ``shape``: ``ws[key]`` when it has that shape, else fresh
+    (and kept in ``ws`` for the next call)."""
+    if ws is None:
+        return np.empty(shape)
+    a = ws.get(key)
+    if a is None or a.shape != shape:
+        a = ws[key] = np.empty(shape)
+    return a
+
+
+def _prepare(pts, c, fast, bz, bs, ws) -> _Strips:
+    """The :class:`_Strips` of the compiled terms ``fast`` (arrays from ``ws`` when given)."""
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
-    geo = _geometry(pts, names)
+    raw = tuple(np.ascontiguousarray(pts[nm], dtype=float) for nm in names)
+    diff = k <= _SMALL_K
+    YT = np.stack([Y.T for Y in raw]) if diff else np.empty((len(names), 0, 0))
+    Yc = _buf(ws, "Yc", (len(names), n, k) if not diff else (len(names), 0, 0))
+    nrm = _buf(ws, "nrm", (len(names), n) if not diff else (len(names), 0))
+    for s_, Y in enumerate(raw if not diff else ()):
+        _dyn.centre_rows(Y, Yc[s_])
+        _dyn.gram_rows(Yc[s_], Yc[s_], nrm[s_], False)
+    cars = list(dict.fromkeys(_names(t)[2] for t in fast))      # first-appearance order
+    cen = [Yc[names.index(car)] if not diff else
+           _dyn.centre_rows(raw[names.index(car)], np.empty((n, k))) for car in cars]
+    vz = [np.ascontiguousarray(a, dtype=float) for t in fast for a in _bvecs(t, bz, bs)]
+    return _Strips(
+        diff, YT, Yc, nrm, raw,
+        np.array([[names.index(nm) for nm in _names(t)] for t in fast], dtype=np.int64),
+        np.array([t.kind for t in fast], dtype=np.int64),
+        np.array([t.params + (0.0,) * (5 - len(t.params)) for t in fast], dtype=float),
+        np.stack(vz[0::2]), np.stack(vz[1::2]),
+        np.array([cars.index(_names(t)[2]) for t in fast], dtype=np.int64),
+        _zext(cen, c, _buf(ws, "Z", (len(cen), n, k + 1))), cen)
+
+
+def _zext(cen: list, c: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """``Z[cz] = [c z̃, c]`` per centred carrier ``z̃`` (the engine's operand)."""
+    for cz, z in enumerate(cen):
+        _dyn.zext_rows(z, c, Z[cz])
+    return Z
+
+
+def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block, ws=None):
+    """The compiled pass: strips dealt to the engine's threads (each with its own
+    accumulators, summed at the end), BLAS single-threaded inside the region; each thread's
+    share is one compiled call (:func:`_kernels.pass_strips`, no GIL) when numpy's BLAS
+    symbols are found, else the same calls from a Python loop (:func:`_loop_share`)."""
+    n = c.shape[0]
+    k = next(iter(pts.values())).shape[1]
+    sp = _prepare(pts, c, fast, bz, bs, ws)
     # below a few hundred agents a thread hand-off costs more than the work it shares
     nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
     strips = _strips(n, block, k, nthreads)
     nthreads = min(nthreads, len(strips))
     maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
-    pos = c > 0.0
-    vecs = [tuple(np.ascontiguousarray(a) for a in _bvecs(t, bz, bs)) for t in fast]
-    specs = [(np.int64(t.kind), np.array(t.params + (0.0,) * (5 - len(t.params)), dtype=float))
-             for t in fast]
-    margin = float(margin)
-    rnd = np.asarray(rnd, dtype=float)
+    groups = _balance(strips, n, nthreads)
+    args = (sp, c, c > 0.0, float(margin), np.asarray(rnd, dtype=float), maxel)
+    share = _compiled_share if _COMPILED else _loop_share
+    results = _parallel.run_parallel(
+        lambda g, grp: share(grp, *args, _Scratch(ws, g, len(sp.kind), sp.Z.shape,
+                                                   len(sp.R), maxel)), groups)
+    outs, acc = results[0]
+    for o2, a2 in results[1:]:
+        outs[:, :6] += o2[:, :6]
+        outs[:, 7:] += o2[:, 7:]
+        np.minimum(outs[:, 6], o2[:, 6], out=outs[:, 6])
+        acc += a2
+    field = _buf(ws, "field", (n, k))
+    for cz, z in enumerate(sp.cen):
+        if cz == 0:
+            _dyn.pair_finish(acc[0], z, field)
+        else:
+            field += _dyn.pair_finish(acc[cz], z, _buf(ws, "fin", (n, k)))
+    return [TermAgg(o) for o in outs], field
 
-    def work(g, my_strips):
-        q = {nm: np.empty(maxel) for nm in names}
-        buf = np.empty((9, n))
-        scr = np.empty((3, n))
-        outs = [_new_out(n) for _ in fast]
-        for i0, i1 in my_strips:
-            shape = (i1 - i0, n - i0)
-            blk = {nm: _sqdist(geo[nm], i0, i1, q[nm][: shape[0] * shape[1]].reshape(shape))
-                   for nm in names}
-            for t, term in enumerate(fast):
-                run, true, car = _names(term)
-                kind, par = specs[t]
-                _kernels.strip_term(i0, blk[run], blk[true], blk[car], c, pos, vecs[t][0],
-                                    vecs[t][1], kind, par, margin, rnd, outs[t], buf, scr)
-        return outs
 
-    groups = [[] for _ in range(nthreads)]
-    loads = [0] * nthreads
-    for i0, i1 in sorted(strips, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
-        g = loads.index(min(loads))
-        groups[g].append((i0, i1))
-        loads[g] += (i1 - i0) * (n - i0)
-    results = _parallel.run_parallel(work, [sorted(gr) for gr in groups])
-    outs = results[0]
-    for o2 in results[1:]:
-        for t in range(len(fast)):
-            outs[t][:6] += o2[t][:6]
-            outs[t][7:] += o2[t][7:]
-            np.minimum(outs[t][6], o2[t][6], out=outs[t][6])
-    return [TermAgg(o) for o in outs]
+class _Scratch:
+    """One thread's arrays of a pass (from ``ws`` when given): ``outs (T, 9, N)`` (zero,
+    row 6 at ``+inf``), ``acc (C, N, k+1)``, the distance blocks ``q (sets, maxel)``, the
+    kernel block ``ph``, the kernels' row buffers ``buf (10, N)``, ``scr (3, N)``."""
+
+    def __init__(self, ws, g, nt, zshape, nsets, maxel):
+        n = zshape[1]
+        self.outs = _buf(ws, ("outs", g), (nt, len(_ROWS), n))
+        self.outs.fill(0.0)
+        self.outs[:, 6] = np.inf
+        self.acc = _buf(ws, ("acc", g), zshape)
+        self.q = _buf(ws, ("q", g), (nsets, maxel))
+        self.ph = _buf(ws, ("ph", g), (maxel,))
+        self.buf = _buf(ws, ("buf", g), (10, n))
+        self.scr = _buf(ws, ("scr", g), (3, n))
+
+
+def _compiled_share(grp, sp, c, pos, margin, rnd, maxel, w):
+    """One thread's strips ``grp`` in one compiled call: ``(outs, acc)``."""
+    _kernels.pass_strips(np.array(grp, dtype=np.int64).reshape(-1, 2), sp.diff, sp.YT, sp.Yc,
+                         sp.nrm, sp.R, _dyn.tau_for(sp.Z.shape[2] - 1), sp.sets, sp.kind,
+                         sp.par, sp.bz, sp.bs, sp.tcz, c, pos, margin, rnd, sp.Z, w.acc, w.outs,
+                         w.q, w.ph, w.buf, w.scr)
+    return w.outs, w.acc
+
+
+def _loop_share(grp, sp, c, pos, margin, rnd, maxel, w):
+    """Twin of :func:`_compiled_share`: the same calls, strip by strip from Python."""
+    n = c.shape[0]
+    q, ph, buf, scr, outs, acc = w.q, w.ph, w.buf, w.scr, w.outs, w.acc
+    acc.fill(0.0)
+    for i0, i1 in grp:
+        shape = (i1 - i0, n - i0)
+        size = shape[0] * shape[1]
+        blk = [_sqdist(sp.geo(j), i0, i1, q[j, :size].reshape(shape)) for j in range(len(sp.R))]
+        phit = ph[:size].reshape(shape)
+        for cz in range(sp.Z.shape[0]):
+            add = 0
+            for t in np.flatnonzero(sp.tcz == cz):
+                r, tr, car = sp.sets[t]
+                _kernels.strip_term(i0, blk[r], blk[tr], blk[car], c, pos, sp.bz[t], sp.bs[t],
+                                    sp.kind[t], sp.par[t], margin, rnd, outs[t], buf, scr,
+                                    phit, add)
+                add = 1
+            _kernels.square_fill(phit)
+            _pair_products(phit, sp.Z[cz], acc[cz], i0, i1, n)
+    return outs, acc

@@ -2,14 +2,17 @@
 
 Only this module of :mod:`kinred.certify` imports numba; every kernel uses ``cache=True``.
 
-``strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, out, buf, scr)``
-    (``buf (9, ≥ N)``, ``scr (3, ≥ N)`` scratch)
+``strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, out, buf, scr,
+phit, add)`` (``buf (10, ≥ N)``, ``scr (3, ≥ N)`` scratch)
     One row strip ``[i0, i0 + b)`` against the columns ``[i0, N)`` (squared distances of the
     projected run's source ``qrun``, of the projected-true source ``qtrue`` and of the
     projected-true carrier ``qcar``, as the engine's strips: each unordered pair ``i < j``
     once) for one pairwise term: the kernel ``φ(r′ᵢⱼ)`` of the projected run, the localized
     slope bound ``Λᵢⱼ = sup |φ′|`` over ``[min(ρᵢⱼ, r′ᵢⱼ), max(ρᵢⱼ, r′ᵢⱼ)]`` times
-    ``1 + margin``, and, accumulated into both rows ``i`` and ``j`` of ``out (9, N)``:
+    ``1 + margin``, the kernel ``φ(ρᵢⱼ)`` at the projected-true distances written (``add = 0``)
+    or added (``add = 1``) into the strip block ``phit (b, N − i0)`` at the pairs ``j > i``
+    (the defect's pair sums ``Σⱼ cⱼ φ(ρᵢⱼ)(Mzⱼ − Mzᵢ)`` are its BLAS products, after
+    :func:`square_fill`), and, accumulated into both rows ``i`` and ``j`` of ``out (9, N)``:
 
     ====  ==========================================================
     row   quantity
@@ -39,6 +42,22 @@ Only this module of :mod:`kinred.certify` imports numba; every kernel uses ``cac
     :meth:`kinred.dynamics.Morse.slope_bound`), 3 Quadratic ``(c,)``.
     Twin: :func:`kinred.certify._aggregates.pair_pass_numpy` (full rows, kernels'
     ``__call__`` and ``slope_bound``).
+``square_fill(phit)``
+    The strip's square part of a kernel block written above its diagonal: the diagonal set to
+    0, the part below it mirrored (``φ`` is symmetric), so that the block feeds the two BLAS
+    products of the dense engine (``kinred.pairsum.dense``). Twin: ``np.triu(P, 1) +
+    np.triu(P, 1).T`` on the square.
+``pass_strips(strips, ...)``
+    One thread's share of the pass in one compiled call without the GIL (as the dynamics
+    engine's ``pair_strips``): per strip the squared distances of every point set (by
+    differences, or BLAS ``−2 Y Yᵀ`` plus the close-pair fix-up), per carrier its terms'
+    :func:`strip_term`, :func:`square_fill` and the two products ``acc += Φ Z``. Twin: the
+    Python strip loop of :func:`kinred.certify._aggregates._fast_pass` (same calls, same
+    order), used when numpy's BLAS symbols are not found.
+
+The compiled functions inline kernels of :mod:`kinred.pairsum._kernels` (``pow_row64``, the
+distance kernels, ``cblas_dgemm``); numba's cache of this file does not see changes there:
+after editing them, touch this file.
 """
 
 from __future__ import annotations
@@ -47,9 +66,9 @@ import math
 
 from numba import njit
 
-from ..pairsum._kernels import pow_row64
+from ..pairsum._kernels import _nb_gemm, pow_row64, sqdist_diff, sqdist_gram_fix
 
-__all__ = ["strip_term"]
+__all__ = ["strip_term", "square_fill", "pass_strips"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -76,9 +95,9 @@ _FM = {"reassoc", "contract"}
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
 def _pairs_cs(q1, q2, qc, ph, pt, beta, G, s_star, f_star, fac, rg, re_, rs,
-              V0, V1, V2, V3, V4, V5, V6):  # pragma: no cover - compiled
+              V0, V1, V2, V3, V4, V5, V6, V7):  # pragma: no cover - compiled
     # per pair of one row: V = [phi, |phi|, max(-phi, 0), lam |Mz_i - Mz_j|, psi_true,
-    # psi_run, max(phi, 0)] (branch-free, vectorizable); ph, pt: phi(r'), phi(rho)
+    # psi_run, max(phi, 0), phi(rho)] (branch-free, vectorizable); ph, pt: phi(r'), phi(rho)
     gev = 0.6 * G if beta > 0.0 else 0.0
     for l in range(q1.shape[0]):
         a1 = q1[l]
@@ -99,11 +118,12 @@ def _pairs_cs(q1, q2, qc, ph, pt, beta, G, s_star, f_star, fac, rg, re_, rs,
         V4[l] = rg * p2 + re_ * (p2 + gev) + rs * 2.0 * beta * p2 * a2 / (1.0 + a2)
         V5[l] = rg * p1 + re_ * (p1 + gev) + rs * 2.0 * beta * p1 * a1 / (1.0 + a1)
         V6[l] = p1
+        V7[l] = p2
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _pairs_morse(q1, q2, qc, par, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5,
-                 V6):  # pragma: no cover - compiled
+                 V6, V7):  # pragma: no cover - compiled
     A = par[0]
     la = par[1]
     B = par[2]
@@ -125,17 +145,19 @@ def _pairs_morse(q1, q2, qc, par, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5,
         V4[l] = rg * abs(phi2) + re_ * ev2 + rs * a2 / R2 * (pa2 + pr2)
         V5[l] = rg * abs(phi) + re_ * ev1 + rs * a1 / R1 * (pa1 + pr1)
         V6[l] = phi if phi > 0.0 else 0.0
+        V7[l] = phi2
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, out, buf,
-               scr):  # pragma: no cover - compiled
+               scr, phit, add):  # pragma: no cover - compiled
     b, m = qrun.shape
     n = c.shape[0]
     # the helpers run without bounds checks: check the shapes once here
-    if (buf.shape[0] < 9 or buf.shape[1] < m or scr.shape[0] < 3 or scr.shape[1] < m
+    if (buf.shape[0] < 10 or buf.shape[1] < m or scr.shape[0] < 3 or scr.shape[1] < m
             or out.shape[0] < 9 or out.shape[1] < n or i0 + m > n or qtrue.shape != qrun.shape
-            or qcar.shape != qrun.shape or bz.shape[0] < n or bs.shape[0] < n):
+            or qcar.shape != qrun.shape or phit.shape != qrun.shape or bz.shape[0] < n
+            or bs.shape[0] < n):
         raise ValueError("strip_term: inconsistent shapes of the blocks and buffers")
     beta = par[1] if kind == 1 else 0.0
     G = par[0]
@@ -161,6 +183,7 @@ def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, ou
         V4 = buf[6, :L]
         V5 = buf[7, :L]
         V6 = buf[8, :L]
+        V7 = buf[9, :L]
         if kind == 1:
             ph = buf[0, :L]
             pt = buf[1, :L]
@@ -169,10 +192,10 @@ def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, ou
             pt[:] = qtrue[a, j0:]
             pow_row64(pt, G, beta, scr)
             _pairs_cs(qrun[a, j0:], qtrue[a, j0:], qcar[a, j0:], ph, pt, beta, G, s_star,
-                      f_star, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5, V6)
+                      f_star, fac, rg, re_, rs, V0, V1, V2, V3, V4, V5, V6, V7)
         elif kind == 2:
             _pairs_morse(qrun[a, j0:], qtrue[a, j0:], qcar[a, j0:], par, fac, rg, re_, rs,
-                         V0, V1, V2, V3, V4, V5, V6)
+                         V0, V1, V2, V3, V4, V5, V6, V7)
         else:
             for l in range(L):
                 V0[l] = par[0]
@@ -182,7 +205,31 @@ def strip_term(i0, qrun, qtrue, qcar, c, pos, bz, bs, kind, par, margin, rnd, ou
                 V4[l] = (rg + re_) * abs(par[0])
                 V5[l] = V4[l]
                 V6[l] = par[0] if par[0] > 0.0 else 0.0
+                V7[l] = par[0]
+        _store_row(phit[a, j0:], V7, add)
         _accumulate(i, i0 + j0, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6, out)
+    return 0
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _store_row(dst, src, add):  # pragma: no cover - compiled
+    if add:
+        for l in range(src.shape[0]):
+            dst[l] += src[l]
+    else:
+        for l in range(src.shape[0]):
+            dst[l] = src[l]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def square_fill(phit):  # pragma: no cover - compiled
+    b = phit.shape[0]
+    if phit.shape[1] < b:
+        raise ValueError("square_fill: the block must hold its b x b square")
+    for a in range(b):
+        phit[a, a] = 0.0
+        for a2 in range(a):
+            phit[a, a2] = phit[a2, a]
     return 0
 
 
@@ -259,3 +306,45 @@ def _accumulate(i, jstart, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6,
     out[6, i] = s6
     out[7, i] += s7
     out[8, i] += s8
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pass_strips(strips, diff, YT, Yc, nrm, R, tau, sets, tkind, tpar, tbz, tbs, tcz, c, pos,
+                margin, rnd, Z, acc, outs, qbuf, phbuf, buf, scr):  # pragma: no cover - compiled
+    # strips (S, 2); point sets s: YT[s] (k, N) if diff else Yc[s] (N, k) centred, nrm[s],
+    # R[s] raw (a tuple); per term t: sets[t] = (run, true, carrier) point-set indices, kind,
+    # params, bz/bs rows, carrier index tcz; Z (C, N, k+1), acc (C, N, k+1) zeroed here;
+    # outs (T, 9, N) with outs[:, 6] = inf; qbuf (point sets, >= maxel), phbuf (>= maxel)
+    N = c.shape[0]
+    ns = qbuf.shape[0]
+    nt = sets.shape[0]
+    acc[:] = 0.0
+    for st in range(strips.shape[0]):
+        i0 = strips[st, 0]
+        i1 = strips[st, 1]
+        bb = i1 - i0
+        m = N - i0
+        for s in range(ns):
+            q = qbuf[s, : bb * m].reshape((bb, m))
+            if diff:
+                sqdist_diff(YT[s], i0, i1, i0, q)
+            else:
+                Rs = R[s]
+                _nb_gemm(-2.0, Yc[s, i0:i1], False, Yc[s, i0:], True, 0.0, q)
+                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau, 0)
+        ph = phbuf[: bb * m].reshape((bb, m))
+        for cz in range(Z.shape[0]):
+            add = 0
+            for t in range(nt):
+                if tcz[t] != cz:
+                    continue
+                strip_term(i0, qbuf[sets[t, 0], : bb * m].reshape((bb, m)),
+                           qbuf[sets[t, 1], : bb * m].reshape((bb, m)),
+                           qbuf[sets[t, 2], : bb * m].reshape((bb, m)), c, pos, tbz[t], tbs[t],
+                           tkind[t], tpar[t], margin, rnd, outs[t], buf, scr, ph, add)
+                add = 1
+            square_fill(ph)
+            _nb_gemm(1.0, ph, False, Z[cz, i0:], False, 1.0, acc[cz, i0:i1])
+            if i1 < N:
+                _nb_gemm(1.0, ph[:, bb:], True, Z[cz, i0:i1], False, 1.0, acc[cz, i1:])
+    return 0

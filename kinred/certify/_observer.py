@@ -1,18 +1,22 @@
-r"""The per-step machinery of a certificate, as an observer of the high-dimensional run.
+r"""The per-step machinery of a certificate: an observer of the high-dimensional Euler run.
 
-:class:`CertificateObserver` is fed the high-dimensional Euler state after every accepted step
-(``observer(t, state, scene)``, ``state`` with ``.x``, ``.v`` in the integrator's working
-coordinates – positions possibly relative to ``state.shift`` – and ``.step``, ``.dt``). It
-steps the projected scene in lockstep (the same floating-point operations as
-:func:`kinred.integrate.simulate`'s Euler path, so that the projected run is bit-identical to
+:class:`CertificateObserver` follows the observer protocol of
+:func:`kinred.integrate.simulate` (``init(t0, state, scene)``, then ``update(t, state, scene)``
+after every accepted step, ``state`` a read-only :class:`~kinred.integrate.StepState` with
+``.x``, ``.v`` in the integrator's working coordinates – positions relative to
+``state.shift`` when it is not None – and ``.step``, ``.h``). It steps the projected scene
+alongside (the same floating-point operations as :func:`~kinred.integrate.simulate`'s Euler
+path, so that the projected run is bit-identical to
 ``simulate(scene.project(M), *project_state(M, x0, v0))``) and propagates the bounds of
 ``docs/certificates.md``:
 
 * the defects ``τₓ = PX⁺ − PX − h PV`` and ``τᵥ = PV⁺ − PV − h F′(PX, PV)`` of the projected
-  high-dimensional trajectory ``(PX, PV) = (M x, M v)`` in the projected Euler scheme (one
-  evaluation of the projected scene's own field per step), kept as vectors;
+  high-dimensional trajectory ``(PX, PV) = (M x, M v)`` in the projected Euler scheme, kept
+  as vectors (``F′(PX, PV)``'s pair sums from the pair pass below, its per-agent effects
+  from the projected scene; ``M x``, ``M v`` projected once per step and reused as the next
+  step's start);
 * the stability of the projected Euler map between ``(PX, PV)`` and the projected run
-  ``(Y, W)``, from one pair pass (:mod:`kinred.certify._aggregates`);
+  ``(Y, W)``, from the same pair pass (:mod:`kinred.certify._aggregates`);
 * a weighted-RMS recursion (mean and fluctuation parts) and a per-agent (ℓ∞) recursion,
   each capped by the other after every step.
 
@@ -27,7 +31,7 @@ import math
 import numpy as np
 
 from .. import observables as _obs
-from .._validate import as_choice
+from .._validate import as_array, as_choice
 from .. import _parallel
 from ..dynamics import Scene
 from ..errors import InvalidInput, SimulationDiverged
@@ -37,28 +41,7 @@ from ._aggregates import pair_pass, pair_pass_numpy
 from ._paper import PaperTracker
 from ._plan import make_plan
 
-__all__ = ["CertificateObserver", "StepState"]
-
-
-class StepState:
-    """What an observer sees after a step (the integrator's working state).
-
-    Attributes
-    ----------
-    x, v : (N, d) ndarray
-        Positions (relative to ``shift`` when it is not None) and velocities.
-    shift : (d,) ndarray or None
-        Constant added to ``x`` to get absolute positions.
-    step : int
-        Number of accepted steps so far.
-    dt : float
-        Step size.
-    """
-
-    __slots__ = ("x", "v", "shift", "step", "dt")
-
-    def __init__(self, x, v, shift, step, dt):
-        self.x, self.v, self.shift, self.step, self.dt = x, v, shift, step, dt
+__all__ = ["CertificateObserver"]
 
 
 def _wnorm(A: np.ndarray, w: np.ndarray) -> tuple[float, float]:
@@ -102,13 +85,20 @@ def _segment_min(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
 
 class CertificateObserver:
-    """Certificate of a projected run, fed the high-dimensional Euler steps.
+    """Certificate of a projected run, as an observer of the high-dimensional Euler run.
+
+    Attach it to ``simulate(scene, x0, v0, t_span, dt, method="euler",
+    observers=[obs])`` (what :func:`~kinred.certify.certify` does), then read
+    :meth:`records`.
 
     Parameters
     ----------
     scene : Scene
         The high-dimensional scene (second order, deterministic, covered effects only).
     M : (k, d) ndarray or Projection
+    x0, v0 : (N, d) array_like
+        The run's initial positions and velocities (absolute): the projected run starts from
+        ``M x0``, ``M v0``.
     save_steps : array_like of int, optional
         Step indices at which to record (default: every step).
     engine : {"fast", "numpy"}
@@ -116,37 +106,87 @@ class CertificateObserver:
     paper : bool
         Also evaluate the paper's a-priori bounds (eq. (2.11) and (2.18)) at the saved steps
         (one high-dimensional pair pass per saved step).
+    states : bool or {"x", "v"}
+        Also keep the projected run's states at the saved steps (``True``: both;
+        ``records()["y"]``, absolute positions, and ``["w"]``, velocities), as
+        ``simulate(scene.project(M), ..., save=SaveAt(states=...))`` would record them.
 
-    Notes
-    -----
-    Call :meth:`init` with the initial working state and the absolute initial data, then the
-    observer itself after every accepted step, then :meth:`records`.
+    Attributes
+    ----------
+    methods : tuple of str
+        ``("euler",)``: the derivation covers forward Euler with a fixed step only;
+        ``simulate`` refuses other methods, and :meth:`update` refuses steps of changing
+        size.
+
+    Raises
+    ------
+    InvalidInput
+        Bad arguments, first-order scenes.
+    NotProjectable
+        Effects the certificate does not cover (see :func:`~kinred.certify.certify`).
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Scene, Alignment, CuckerSmale
+    >>> from kinred.integrate import simulate
+    >>> rng = np.random.default_rng(0)
+    >>> x0, v0 = rng.normal(size=(30, 20)), rng.normal(size=(30, 20))
+    >>> M = rng.normal(0, 1 / np.sqrt(5), (5, 20))
+    >>> scene = Scene([Alignment(CuckerSmale(1.0, 0.4))])
+    >>> obs = CertificateObserver(scene, M, x0, v0, save_steps=[0, 40], paper=False)
+    >>> tr = simulate(scene, x0, v0, (0, 2), 0.05, observers=[obs])
+    >>> rec = obs.records()
+    >>> rec["step"].tolist(), bool(np.all(rec["bound"] >= rec["error"]))
+    ([0, 40], True)
     """
 
-    def __init__(self, scene, M, *, save_steps=None, engine: str = "fast", paper: bool = True):
+    methods = ("euler",)
+
+    def __init__(self, scene, M, x0, v0, *, save_steps=None, engine: str = "fast",
+                 paper: bool = True, states=False):
         if not isinstance(scene, Scene):
             raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
         self.scene = scene
         self.P = as_projection(M)
         self.engine = as_choice(engine, "engine", ("fast", "numpy"))
+        x0 = as_array(x0, "x0", ndim=2)
+        if x0.shape[0] < 1 or x0.shape[1] < 1:
+            raise InvalidInput(f"x0 must have at least one agent and one dimension, got "
+                               f"{x0.shape}")
+        self.plan = make_plan(scene, x0.shape[0])     # refuse uncovered effects before work
+        if v0 is None:
+            raise InvalidInput("v0 must be given: certificates are for second-order scenes "
+                               "(positions and velocities)")
+        self.x0, self.v0 = x0, as_array(v0, "v0", shape=x0.shape)
+        if self.P.d != x0.shape[1]:
+            raise InvalidInput(f"M must have d = {x0.shape[1]} columns (x0's dimension), got "
+                               f"shape {self.P.shape}")
+        scene._check_state(self.x0, self.v0)
         self.save_steps = None if save_steps is None else {int(s) for s in save_steps}
         self.paper = bool(paper)
+        if states not in (True, False, "x", "v"):
+            raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {states!r}")
+        self.keep = {"y": states in (True, "x"), "w": states in (True, "v")}
+
+    def __repr__(self) -> str:
+        return (f"CertificateObserver(N={self.x0.shape[0]}, d={self.P.d}, k={self.P.k}, "
+                f"engine={self.engine!r})")
 
     # ------------------------------------------------------------------ set-up
-    def init(self, t0: float, state: StepState, x0: np.ndarray, v0: np.ndarray) -> None:
-        """Start from the working state ``state`` of the initial data ``(x0, v0)`` (absolute)."""
-        P, scene = self.P, self.scene
-        n, d = x0.shape
-        if P.d != d:
-            raise InvalidInput(f"M must map R^{d} (the scene's dimension), got shape {P.shape}")
-        self.plan = make_plan(scene, n)
+    def init(self, t0: float, state, scene) -> None:
+        """Start from the working state ``state`` (step 0) of the initial data."""
+        P, scene = self.P, self._check_run(state, scene)
+        if state.step != 0:
+            raise InvalidInput(f"init must see step 0, got step {state.step}")
+        n, d = self.x0.shape
         self.pscene = scene.project(P)
         self.w = scene.agent_weights(n)
         self.c = scene.coefficients(n)
         self.t0 = float(t0)
+        self.h = None
         self.n, self.k = n, P.k
         self.mixed = scene.precision == "mixed"
-        y0, w0 = P.apply(x0), P.apply(v0)
+        y0, w0 = P.apply(self.x0), P.apply(self.v0)
         # the projected run, as simulate(pscene, y0, w0) starts it
         self.shift_y = _obs.centre(y0, self.w) if self.pscene.translation_invariant else None
         self.Y = y0 - self.shift_y if self.shift_y is not None else y0.copy()
@@ -182,8 +222,11 @@ class CertificateObserver:
                    vm * (1 + u4) + u4 * nv, vf * (1 + u4) + u4 * nv]
         self.R2 = [0.0, 0.0, 0.0, 0.0]          # the round-off share of the L2 recursion
         self.rec = {key: [] for key in ("t", "step", "error", "error_max", "bound", "bound_max",
-                                        "roundoff", "w1_bound", "w1_coupling", "saturated")}
+                                        "roundoff", "w1_bound", "w1_coupling", "saturated",
+                                        "error_v", "bound_v")}
+        self.kept = {key: [] for key, on in self.keep.items() if on}
         self.tracker = PaperTracker(scene, P, self.plan, self.w) if self.paper else None
+        self._ws = {}                           # the pair pass's scratch arrays, step to step
         self._step = 0
         if self._saving(0):
             self._record(self.t0, state)
@@ -191,22 +234,41 @@ class CertificateObserver:
     def _saving(self, step: int) -> bool:
         return self.save_steps is None or step in self.save_steps
 
-    # ------------------------------------------------------------------ one step
-    def __call__(self, t, state: StepState, scene=None) -> None:
-        """Advance by one accepted high-dimensional step (``state`` after it)."""
-        self.update(t, state)
+    def _check_run(self, state, scene):
+        """The run fed to the observer is the one it was built for."""
+        if scene is not self.scene:
+            raise InvalidInput(f"{self!r} was built for another scene than the run's ({scene!r})")
+        if state.x.shape != self.x0.shape or state.v is None:
+            raise InvalidInput(f"{self!r} was built for states of shape {self.x0.shape}; the "
+                               f"run's are {state.x.shape}")
+        return scene
 
-    def update(self, t, state: StepState) -> None:
-        h = state.dt
-        n_prev = state.step - 1
-        if n_prev != self._step:
+    def _check_step(self, t: float, state) -> float:
+        """The step size, refusing steps out of order or of changing size (fixed-step Euler)."""
+        if state.step != self._step + 1:
             raise InvalidInput(f"observer fed step {state.step} after step {self._step}: every "
                                "accepted step must be observed, in order")
+        h = float(state.h)
+        if self.h is None:
+            self.h = h
+        if h != self.h or t != self.t0 + state.step * h:
+            raise InvalidInput(
+                f"step {state.step} ends at t={t!r} with size {h!r} after steps of {self.h!r}: "
+                "certificates cover forward Euler with a fixed step only (method='euler', "
+                "docs/certificates.md); adaptive step sizes are not supported")
+        return h
+
+    # ------------------------------------------------------------------ one step
+    def update(self, t, state, scene) -> None:
+        """Advance by one accepted high-dimensional step (``state`` after it)."""
+        self._check_run(state, scene)
+        h = self._check_step(t, state)
+        n_prev = state.step - 1
         tn = self.t0 + n_prev * h
         PX, PV, Y, W = self.PX, self.PV, self.Y, self.W
-        _, Fd = self.pscene._rhs(PX, PV, tn)                    # the defect's projected field
         dY, dW = self.pscene._rhs(Y, W, tn)                     # the projected step's field
-        aggs = self._pass(PX, PV, Y, W)
+        aggs, Fd = self._pass(PX, PV, Y, W)
+        Fd = self._local_field(Fd, PX, PV, tn)                  # F'(PX, PV): the defect's
         coef = self._coefficients(aggs, PV, W, h)
         pre = self._allowance_inputs(aggs, PX, PV, Y, W, Fd, dW)
         # the projected Euler step, exactly as simulate's (dY may be W itself: Y first)
@@ -255,14 +317,23 @@ class CertificateObserver:
         return out
 
     def _pass(self, PX, PV, Y, W):
+        """The pair pass: per-term aggregates and the pair sums of ``F′(PX, PV)``."""
         pts = {"PX": PX, "PV": PV, "Y": Y, "W": W}
         fn = pair_pass if self.engine == "fast" else pair_pass_numpy
         if not self.plan.terms:
-            return []
+            return [], np.zeros_like(PV)
         bz = {"x": self.fx, "v": self.bv}
         bs = {"x": self.fx, "v": self.fv}
-        return fn(pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
-                  _ro.pass_constants(self.n, self.mixed))
+        args = (pts, self.c, self.plan.terms, bz, bs, _ro.COEF_MARGIN,
+                _ro.pass_constants(self.n, self.mixed))
+        return fn(*args, ws=self._ws)
+
+    def _local_field(self, F, PX, PV, t) -> np.ndarray:
+        """``F′(PX, PV)`` from its pair sums ``F``: the projected scene's per-agent effects
+        (self-propulsion, drifts) added in place, as its own field adds them."""
+        for e in self.pscene._local:
+            F += e.drift(PX, PV, t)
+        return F
 
     def _coefficients(self, aggs, PV, W, h) -> dict:
         """Contraction and coupling factors of the projected Euler map (docs/certificates.md §3)."""
@@ -449,7 +520,7 @@ class CertificateObserver:
         self.saturated = bool(saturated)
 
     # ------------------------------------------------------------------ records
-    def _record(self, t: float, state: StepState) -> None:
+    def _record(self, t: float, state) -> None:
         w = self.w
         e = (self.Y - self.PX) + self.delta_c
         ev = self.W - self.PV
@@ -473,14 +544,27 @@ class CertificateObserver:
         rec["saturated"].append(float(self.saturated))
         rec["w1_coupling"].append(float(w @ np.sqrt(ex2 + ev2)))
         rec["w1_bound"].append(min(rec["bound"][-1], float(w @ per)))
+        # the velocities alone: ‖ε‖_w ≤ (|ε̄|² + ‖ε̃‖²)^½ and ≤ ‖bᵛ‖_w
+        lv = min(math.hypot(self.L2[2], self.L2[3]), math.sqrt(float(w @ self.bv ** 2)))
+        rec["error_v"].append(math.sqrt(float(w @ ev2)))
+        rec["bound_v"].append((lv + mu_v) * grow)
+        if "y" in self.kept:
+            self.kept["y"].append(self.Y + self.shift_y if self.shift_y is not None
+                                  else self.Y.copy())
+        if "w" in self.kept:
+            self.kept["w"].append(self.W.copy())
         if self.tracker is not None:
             with _parallel.blas_threads(1):
                 self.tracker.record(t - self.t0, state.x, state.v, self.PX, self.PV, self.Y,
                                     self.W)
 
     def records(self) -> dict:
-        """The recorded series as arrays (plus the paper's bounds when requested)."""
+        """The recorded series as arrays: those of :class:`~kinred.certify.Certificate`
+        (``error``, ``bound``, ..., ``error_v``, ``bound_v``, the paper's bounds, NaN unless
+        requested), ``t`` and ``step``, and the projected states ``y``, ``w`` (``(T, N, k)``)
+        when kept."""
         out = {key: np.asarray(val, dtype=float) for key, val in self.rec.items()}
+        out.update({key: np.array(val) for key, val in self.kept.items()})
         out["step"] = out["step"].astype(np.int64)
         if self.tracker is not None:
             out.update(self.tracker.bounds())

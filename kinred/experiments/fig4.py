@@ -6,7 +6,12 @@ the relative projection error of the velocities over time,
 
 .. math:: e_{\\rm proj}(t) = \\Big(\\sum_i \\|M v_i(t) - w_i(t)\\|^2 \\big/ \\sum_i \\|M v_i(t)\\|^2\\Big)^{1/2},
 
-with ``w`` the projected simulation (eq. (2.15)).
+with ``w`` the projected simulation (eq. (2.15)), and its certified bound: the projected runs are
+stepped by :class:`kinred.certify.CertificateObserver` alongside the high-dimensional run
+(bit-identical to ``simulate(scene.project(M), ...)``), whose bound ``bound_v`` of the weighted
+RMS velocity error ``(Σᵢ wᵢ|Mvᵢ − wᵢ|²)^{1/2}`` is divided by the same
+``(Σᵢ wᵢ|Mvᵢ|²)^{1/2}`` (uniform weights ``wᵢ = 1/N``: the same normalization as the measured
+curve). See ``docs/certificates.md``.
 
 Right panel: initial data with 80 % zero entries, L ∈ {1, 2, 3, 5, 7, 9} independent
 projections into k = 20 (eq. (3.17)), the velocity trajectories recovered by ℓ1 minimization
@@ -101,12 +106,12 @@ def _scene(cfg: Fig4Config):
     return Scene([Alignment(kernel=CuckerSmale(G=cfg.G, beta=cfg.beta))], normalize=cfg.normalize)
 
 
-def _simulate(scene, x0, v0, cfg: Fig4Config, *, states: bool):
+def _simulate(scene, x0, v0, cfg: Fig4Config, *, states: bool, observers=None):
     from ..integrate import SaveAt, simulate
 
     return simulate(scene, x0, v0, t_span=(0.0, cfg.steps * cfg.dt), dt=cfg.dt, method="euler",
                     save=SaveAt(every=cfg.record_every, observables=("gamma",),
-                                states="v" if states else False))
+                                states="v" if states else False), observers=observers)
 
 
 def _relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -116,6 +121,12 @@ def _relative(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(num / den)
 
 
+def _relative_bound(rms: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A bound of :func:`_relative` ``(a, b)`` from a bound ``rms (T,)`` of the uniformly
+    weighted RMS ``(Σᵢ‖aᵢ − bᵢ‖²/N)^{1/2}``: ``rms·√N / (Σᵢ‖bᵢ‖²)^{1/2}``."""
+    return rms * np.sqrt(b.shape[1]) / np.sqrt(np.sum(b ** 2, axis=(1, 2)))
+
+
 @dataclass(frozen=True)
 class Fig4Result:
     """Projection errors (left panel) and recovery errors (right panel) over time."""
@@ -123,6 +134,7 @@ class Fig4Result:
     config: Fig4Config
     t: np.ndarray
     projection_error: dict     # {k: (T,)}
+    projection_bound: dict     # {k: (T,)}: certified bound of projection_error
     recovery_error: dict       # {L: (T,)}
     recovery_status: dict      # {L: fraction of converged problems}
     wall_time: float
@@ -136,20 +148,25 @@ class Fig4Result:
             "eta": self.config.eta,
             "t": self.t.tolist(),
             "projection_error": {str(k): v.tolist() for k, v in self.projection_error.items()},
+            "projection_bound": {str(k): v.tolist() for k, v in self.projection_bound.items()},
             "recovery_error": {str(L): v.tolist() for L, v in self.recovery_error.items()},
             "recovery_converged_fraction": {str(L): f for L, f in self.recovery_status.items()},
             "wall_time_s": self.wall_time,
         }
 
 
-def _projected_runs(scene, x0, v0, cfg, k, n_proj, rng_seed):
-    """``n_proj`` independent projections into ℝᵏ: (list of M, list of w-trajectories)."""
+def _projection(cfg, k, rng_seed, ell):
     from .._rng import member_seed
     from ..projection import jl_matrix
 
+    return jl_matrix(k, cfg.d, kind=cfg.kind, seed=member_seed(cfg.seed, (rng_seed, k, ell)))
+
+
+def _projected_runs(scene, x0, v0, cfg, k, n_proj, rng_seed):
+    """``n_proj`` independent projections into ℝᵏ: (list of M, list of w-trajectories)."""
     Ms, ws = [], []
     for ell in range(n_proj):
-        M = jl_matrix(k, cfg.d, kind=cfg.kind, seed=member_seed(cfg.seed, (rng_seed, k, ell)))
+        M = _projection(cfg, k, rng_seed, ell)
         tr = _simulate(scene.project(M), M.apply(x0), M.apply(v0), cfg, states=True)
         Ms.append(M)
         ws.append(tr.v)
@@ -165,15 +182,10 @@ def run(cfg: Fig4Config | None = None, *, out_dir=None, progress: bool = False) 
     rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(0,)))
     scene = _scene(cfg)
 
-    # Left panel: dense normal initial data, projection error per k.
+    # Left panel: dense normal initial data, projection error per k and its certified bound.
     x0 = rng.standard_normal((cfg.N, cfg.d))
     v0 = rng.standard_normal((cfg.N, cfg.d))
-    full = _simulate(scene, x0, v0, cfg, states=True)
-    proj_err = {}
-    for k in cfg.ks:
-        (M,), (w,) = _projected_runs(scene, x0, v0, cfg, k, 1, 1)
-        Mv = np.einsum("tnd,kd->tnk", full.v, M.to_dense())
-        proj_err[int(k)] = _relative(w, Mv)
+    full, proj_err, proj_bound = _left_panel(scene, x0, v0, cfg)
 
     # Right panel: 80 % zero entries, L projections into k_recovery, l1 recovery of v(t).
     mask_x = rng.random((cfg.N, cfg.d)) >= cfg.zero_fraction
@@ -187,17 +199,38 @@ def run(cfg: Fig4Config | None = None, *, out_dir=None, progress: bool = False) 
         res = recover(Ms[:L], ws[:L], eta=cfg.eta, original=full_s.v)
         rec_err[int(L)] = np.asarray(res.relative_error)
         rec_ok[int(L)] = float(np.mean(res.status == "converged"))
-    result = Fig4Result(cfg, np.asarray(full.t), proj_err, rec_err, rec_ok,
+    result = Fig4Result(cfg, np.asarray(full.t), proj_err, proj_bound, rec_err, rec_ok,
                         time.perf_counter() - t0)
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
 
 
+def _left_panel(scene, x0, v0, cfg):
+    """The high-dimensional run with one certificate observer per ``k`` (each steps its
+    projected run): ``(trajectory, {k: relative error}, {k: its certified bound})``."""
+    from ..certify import CertificateObserver
+
+    steps = range(0, cfg.steps + 1, cfg.record_every)
+    Ms = {int(k): _projection(cfg, k, 1, 0) for k in cfg.ks}
+    obs = {k: CertificateObserver(scene, M, x0, v0, save_steps=steps, paper=False, states="v")
+           for k, M in Ms.items()}
+    full = _simulate(scene, x0, v0, cfg, states=True, observers=list(obs.values()))
+    err, bound = {}, {}
+    for k, M in Ms.items():
+        rec = obs[k].records()
+        Mv = np.einsum("tnd,kd->tnk", full.v, M.to_dense())
+        err[k] = _relative(rec["w"], Mv)
+        bound[k] = _relative_bound(rec["bound_v"], Mv)
+    return full, err, bound
+
+
 def _figure(plt, result: Fig4Result):
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
     for k, e in result.projection_error.items():
-        a.plot(result.t, e, label=f"k={k}")
+        line, = a.plot(result.t, e, label=f"k={k}")
+        a.plot(result.t, result.projection_bound[k], "--", color=line.get_color())
+    a.plot([], [], "--", color="0.3", label="certified bound")
     a.set_xlabel("t")
     a.set_ylabel("relative projection error of v")
     a.set_title("Figure 4 (left): projection error")
@@ -209,6 +242,11 @@ def _figure(plt, result: Fig4Result):
     b.set_title(f"Figure 4 (right): recovery from L projections into k={result.config.k_recovery}")
     b.legend()
     return fig
+
+
+def _worst_ratio(t, bound, err) -> float:
+    sel = (t >= 1.0) & (err > 0)
+    return float(np.max(bound[sel] / err[sel])) if np.any(sel) else float("nan")
 
 
 def write_outputs(result: Fig4Result, out_dir) -> Path:
@@ -229,9 +267,12 @@ def write_outputs(result: Fig4Result, out_dir) -> Path:
                           f"{cfg.normalize!r}, G={cfg.G}, {cfg.steps} Euler steps of {cfg.dt}")
     s = rep.section("Errors over time")
     s.add_drawn(drawn)
-    s.tables.append(Table(["k", "max error", "final error"],
-                          [[k, float(e.max()), float(e[-1])] for k, e in result.projection_error.items()],
-                          caption="relative projection error of v"))
+    s.tables.append(Table(["k", "max error", "final error", "final bound",
+                           "worst bound/error (t >= 1)"],
+                          [[k, float(e.max()), float(e[-1]), float(result.projection_bound[k][-1]),
+                            _worst_ratio(result.t, result.projection_bound[k], e)]
+                           for k, e in result.projection_error.items()],
+                          caption="relative projection error of v and its certified bound"))
     s.tables.append(Table(["L", "max error", "final error", "converged"],
                           [[L, float(e.max()), float(e[-1]), result.recovery_status[L]]
                            for L, e in result.recovery_error.items()],

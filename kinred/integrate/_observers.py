@@ -5,6 +5,10 @@ An observer is a callable ``obs(t, state, scene)`` (or, if not callable, an obje
 passed, with an optional ``init(t0, state, scene)`` called once at ``t0``.
 ``state`` is a :class:`StepState`, a small read-only view of the integrator's working arrays.
 Error certificates, energies or custom diagnostics are observers; so is the progress bar.
+An observer that is valid for some integrators only declares them in an attribute
+``methods`` (a tuple of names of :data:`~kinred.integrate.SOLVERS`); ``simulate`` refuses a
+run with any other method before the first step (an error certificate of forward Euler,
+:class:`kinred.certify.CertificateObserver`, declares ``("euler",)``).
 
 An exception raised by an observer propagates unchanged (an observer may stop a run).
 
@@ -73,7 +77,9 @@ class Observer(Protocol):
     at ``t0`` before the first step. ``update`` is called after every accepted step,
     once the step passed the divergence checks and was recorded; ``state`` is a read-only
     :class:`StepState`. An exception raised by an observer propagates unchanged (an
-    observer may stop a run).
+    observer may stop a run). An optional attribute ``methods`` (tuple of integrator names)
+    restricts the runs the observer accepts: ``simulate`` refuses other methods before any
+    work.
     """
 
     def __call__(self, t: float, state: StepState, scene) -> None: ...
@@ -92,8 +98,9 @@ def state_view(t, x, v, shift, step, h) -> StepState:
     return StepState(float(t), _readonly(x), _readonly(v), shift, int(step), float(h))
 
 
-def as_observers(observers) -> list:
-    """``[(init or None, update)]`` of ``None``, one observer or a sequence of them."""
+def as_observers(observers, method: str | None = None) -> list:
+    """``[(init or None, update)]`` of ``None``, one observer or a sequence of them; with
+    ``method``, an observer whose ``methods`` attribute does not name it is refused."""
     if observers is None:
         return []
     if callable(observers) or hasattr(observers, "update") or hasattr(observers, "init"):
@@ -113,6 +120,10 @@ def as_observers(observers) -> list:
             raise InvalidInput(f"observers[{i}] = {o!r} is not an observer: it must be callable "
                                f"as obs(t, state, scene) or have a method update(t, state, "
                                f"scene) (and optionally init(t0, state, scene))")
+        allowed = getattr(o, "methods", None)
+        if method is not None and allowed is not None and method not in tuple(allowed):
+            raise InvalidInput(f"observers[{i}] = {o!r} is valid only for method in "
+                               f"{tuple(allowed)!r}; got method={method!r}")
         out.append((init, update))
     return out
 

@@ -141,7 +141,8 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         ``obs`` is not callable; ``obs.init(t0, state, scene)`` first if present), ``state``
         a read-only :class:`~kinred.integrate.StepState` (``.t``, ``.x``, ``.v``,
         ``.shift``, ``.step``, ``.h``): for quantities that need every step (certificates,
-        energies, diagnostics).
+        energies, diagnostics). An observer with a ``methods`` attribute (tuple of names)
+        accepts only those methods.
 
     Returns
     -------
@@ -254,7 +255,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     control = (adaptive if spec.adaptive else ConstantStep()).init(solver, t0, t1, dt, method)
     n_steps = None if spec.adaptive else control.n_steps
     grid = save_grid(save, t0, t1, dt, n_steps, method)
-    observers = as_observers(observers)
+    observers = as_observers(observers, method)
 
     shift = _obs.centre(x0, w) if scene.translation_invariant else None
     x = x0 - shift if shift is not None else x0.copy()

@@ -1,8 +1,7 @@
 r"""The NUFFT pair-sum backend: fast summation of smooth radial kernels, ``O(N + n^k log n)``.
 
 For positions (or velocities) in ``k ≤ 3`` dimensions – projected systems, physical 2-D/3-D
-swarms – every pair term ``Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (the paper's class (1.1), label
-``eq:dyn``, with ``f_ij = c_j φ``; eq. (2.13) ``CS2`` and eq. (3.14) ``DOrsogna2``) is computed
+swarms – every pair term ``Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (the paper's class (1.1), with ``f_ij = c_j φ``; eq. (2.13) ``CS2`` and eq. (3.14) ``DOrsogna2``) is computed
 as ``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` with the carrier ``z̃`` centred by its ``c``-weighted mean
 (so the error is relative to the *fluctuations* of the carrier: velocities that have flocked
 to 1e-15 keep their relative accuracy), each of the ``d + 1`` sums
