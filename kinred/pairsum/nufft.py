@@ -1,14 +1,15 @@
 r"""The NUFFT pair-sum backend: fast summation of smooth radial kernels, ``O(N + n^k log n)``.
 
 For positions (or velocities) in ``k ≤ 3`` dimensions – projected systems, physical 2-D/3-D
-swarms – every pair term ``Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (the paper's class (1.1), with ``f_ij = c_j φ``; eq. (2.13) ``CS2`` and eq. (3.14) ``DOrsogna2``) is computed
-as ``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` with the carrier ``z̃`` centred by its ``c``-weighted mean
-(so the error is relative to the *fluctuations* of the carrier: velocities that have flocked
-to 1e-15 keep their relative accuracy), each of the ``d + 1`` sums
-``Σⱼ αⱼ φ(|sᵢ − sⱼ|)`` by a type-1 NUFFT of the strengths, a multiplication by the Fourier
-coefficients of a smoothly windowed periodic version of ``φ``, and a type-2 NUFFT
-(:mod:`kinred.pairsum._fastsum`; Potts–Steidl–Nieslony fast summation, transforms by
-``finufft``). Memory ``O(N + n^k)``, never ``N × N``.
+swarms – every pair term ``Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (the paper's class (1.1),
+with ``f_ij = c_j φ``; the Cucker–Smale kernel of eq. (2.13) and the soft Morse kernel of eq. (3.14)) is
+computed as ``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` with the carrier ``z̃`` centred by its
+``c``-weighted mean (so the error is relative to the *fluctuations* of the carrier: velocities
+that have flocked to 1e-15 keep their relative accuracy), each of the ``d + 1`` sums
+``Σⱼ αⱼ φ(|sᵢ − sⱼ|)`` by a type-1 NUFFT of the strengths, a multiplication by the Fourier coefficients
+of a smoothly windowed periodic version of ``φ``, and a type-2 NUFFT
+(``kinred.pairsum._fastsum``; Potts–Steidl–Nieslony fast summation, transforms by ``finufft``).
+Memory ``O(N + n^k)``, never ``N × N``.
 
 The box, the window and the number of modes follow the cloud's extents from the requested
 ``tol``; they are kept while the cloud still fits (a moving cloud reuses them, a growing one
