@@ -14,8 +14,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from .._validate import as_choice, as_float, as_int
-from ..errors import InvalidInput, TooLarge
+from .._validate import as_choice, as_float, as_int, check_alloc
+from ..errors import InvalidInput
 from ..measures import Atomic, Empirical1D, Measure, Mixture, PushForward, TensorProduct, Univariate
 from ._budget import _TOL, RULE_CONSTANT, Budget, _ceil_ratio, budget
 from ._quantization import (
@@ -26,9 +26,8 @@ from ._quantization import (
     Quantization1D,
     TensorQuantization,
     _largest,
-    _limit_text,
 )
-from ._size import LEVEL_CHUNK, fmt_bytes, fmt_count, materialize_bytes, max_bytes_limit, quantile_bytes
+from ._size import LEVEL_CHUNK, fmt_count, materialize_bytes, max_bytes_limit, quantile_bytes
 
 __all__ = ["Preflight", "preflight", "quantize", "quantize_1d"]
 
@@ -339,14 +338,16 @@ def materialize_fit(q: Quantization, limit: int) -> str:
     return text + (f", eps >= {e:g} fits" if e else "")
 
 
-def _too_large(call: str, need: _Need, dim: int, limit: int, fit: str) -> TooLarge:
+def _check_need(call: str, need: _Need, dim: int, limit: int, fit) -> None:
+    """:func:`~kinred._validate.check_alloc` of a planned quantization (``fit()``: what would
+    fit, computed only past the limit)."""
     least = "at least " if need.at_least else ""
-    return TooLarge(
-        f"{call} would allocate {least}{fmt_bytes(need.bytes)} before any atom is built: "
-        f"{least}{fmt_count(need.points)} per-coordinate quantile points (levels, points, weights) "
-        f"for {least}{fmt_count(need.atoms)} atoms in dimension {dim}, more than "
-        f"{_limit_text(limit)}; {fit} (kinred.quantize.budget and preflight size it without arrays)"
-    )
+    check_alloc(need.bytes, call,
+                lambda: f"{fit()} (kinred.quantize.budget and preflight size it without arrays)",
+                max_bytes=limit, keyword="max_bytes", at_least=need.at_least,
+                detail=f" before any atom is built: {least}{fmt_count(need.points)} per-coordinate "
+                       f"quantile points (levels, points, weights) for {least}"
+                       f"{fmt_count(need.atoms)} atoms in dimension {dim}")
 
 
 # ------------------------------------------------------------------------------------------
@@ -444,11 +445,12 @@ def quantize_1d(mu, n: int, *, rule: str = "midpoint", max_bytes=None) -> Quanti
     n = as_int(n, "n", low=1)
     rule = as_choice(rule, "rule", RULE_CONSTANT)
     limit = max_bytes_limit(max_bytes)
-    need = _need(_Plan(mu, "1d", n=n))
-    if need.bytes > limit:
+
+    def fit():
         k = _largest(lambda m: _need(_Plan(mu, "1d", n=m)).bytes <= limit, min(n, limit))
-        raise _too_large(f"quantize_1d(n={fmt_count(n)})", need, 1, limit,
-                         f"n <= {k} fits" if k else "no n fits: raise max_bytes")
+        return f"n <= {k} fits" if k else "no n fits: raise max_bytes"
+
+    _check_need(f"quantize_1d(n={fmt_count(n)})", _need(_Plan(mu, "1d", n=n)), 1, limit, fit)
     return _build_1d(mu, n, rule)
 
 
@@ -508,8 +510,7 @@ def quantize(mu: Measure, *, eps: float | None = None, atoms: int | None = None,
         need = _need(plan)
     except _Unfit as exc:
         plan, need = None, exc.need
-    if need.bytes > limit:
-        call = f"quantize(eps={eps:g})" if eps is not None else f"quantize(atoms={fmt_count(atoms)})"
-        fit = _fit_text(mu, eps, atoms, rule, node_limit, limit, "quantize")
-        raise _too_large(call, need, mu.dim, limit, fit)
+    call = f"quantize(eps={eps:g})" if eps is not None else f"quantize(atoms={fmt_count(atoms)})"
+    _check_need(call, need, mu.dim, limit,
+                lambda: _fit_text(mu, eps, atoms, rule, node_limit, limit, "quantize"))
     return _build(plan, rule)

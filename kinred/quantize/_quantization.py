@@ -9,21 +9,12 @@ from typing import Iterator
 
 import numpy as np
 
-from .._validate import as_int
+from .._validate import as_int, check_alloc
 from ..errors import TooLarge
 from ..measures import Atomic, Measure
 from ._budget import Budget
 from ._error1d import w1_quantile
-from ._size import (
-    DEFAULT_MAX_BYTES,
-    ENV_MAX_BYTES,
-    block_rows,
-    chunks_bytes,
-    fmt_bytes,
-    fmt_count,
-    materialize_bytes,
-    max_bytes_limit,
-)
+from ._size import block_rows, chunks_bytes, fmt_count, materialize_bytes, max_bytes_limit
 
 __all__ = [
     "Quantization",
@@ -107,14 +98,14 @@ class Quantization:
         stop = min(stop, self.n_atoms)
         limit = max_bytes_limit(max_bytes)
         rows = min(chunk_size, max(stop - start, 1))
-        need = chunks_bytes(rows, self._width)
-        if need > limit:
-            fit = _largest(lambda r: chunks_bytes(r, self._width) <= limit, rows)
-            raise TooLarge(
-                f"iter_chunks(chunk_size={chunk_size}) would allocate {fmt_bytes(need)} per chunk of "
-                f"{rows} atoms in dimension {self.dim}, more than {_limit_text(limit)}; "
-                + (f"chunk_size <= {fit} fits" if fit else "no chunk size fits: raise max_bytes")
-            )
+
+        def fit():
+            k = _largest(lambda r: chunks_bytes(r, self._width) <= limit, rows)
+            return f"chunk_size <= {k} fits" if k else "no chunk size fits: raise max_bytes"
+
+        check_alloc(chunks_bytes(rows, self._width), f"iter_chunks(chunk_size={chunk_size})", fit,
+                    max_bytes=limit, keyword="max_bytes",
+                    detail=f" per chunk of {rows} atoms in dimension {self.dim}")
         return self._chunks(chunk_size, start, stop)
 
     def _chunks(self, chunk_size, start, stop):
@@ -151,15 +142,14 @@ class Quantization:
                 f"max_atoms={max_atoms}: stream them with iter_chunks(), raise max_atoms, or ask for "
                 "fewer atoms (larger eps / smaller atoms)"
             )
-        need = self.materialize_bytes
-        if need > limit:
+
+        def fit():
             from ._plan import materialize_fit  # the planner builds these classes
 
-            raise TooLarge(
-                f"materialize() would allocate {fmt_bytes(need)} for {fmt_count(n)} atoms in "
-                f"dimension {self.dim}, more than {_limit_text(limit)}; {materialize_fit(self, limit)}; "
-                "or stream them with iter_chunks()"
-            )
+            return f"{materialize_fit(self, limit)}; or stream them with iter_chunks()"
+
+        check_alloc(self.materialize_bytes, "materialize()", fit, max_bytes=limit,
+                    keyword="max_bytes", detail=f" for {fmt_count(n)} atoms in dimension {self.dim}")
         n = int(n)
         rows = block_rows(self._width)
         pts, w = np.empty((n, self.dim)), np.empty(n)
@@ -168,11 +158,6 @@ class Quantization:
             pts[i:i + m], w[i:i + m] = self._block(i, m)
         w /= w.sum()
         return Atomic(pts, w)
-
-
-def _limit_text(limit: int) -> str:
-    return (f"the limit max_bytes = {fmt_bytes(limit)} (keyword max_bytes=, environment variable "
-            f"{ENV_MAX_BYTES}; default {fmt_bytes(DEFAULT_MAX_BYTES)})")
 
 
 def _largest(fits, hi: int) -> int:

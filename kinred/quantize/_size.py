@@ -11,19 +11,22 @@ The counts come from the budget (pure integers, never built), so the bytes are e
 integers computed before anything is allocated and compared with one limit,
 :func:`max_bytes_limit`: the keyword ``max_bytes=`` of the call, else the environment variable
 ``KINRED_MAX_BYTES``, else :data:`DEFAULT_MAX_BYTES`. Past the limit the call raises
-:class:`~kinred.errors.TooLarge`. The default is a fixed number of bytes, not a fraction of the
-memory free at the time, so that a call is refused or accepted the same way on every machine
-and in every run.
+:class:`~kinred.errors.TooLarge` (through :func:`kinred._validate.check_alloc`, the preflight
+shared by every large allocation of kinred). The default is a fixed number of bytes, not a
+fraction of the memory free at the time, so that a call is refused or accepted the same way on
+every machine and in every run.
 """
 
 from __future__ import annotations
 
-import math
-import os
-import re
-
-from .._validate import as_int
-from ..errors import InvalidInput
+from .._validate import (  # the one limit of every preflight (kinred._validate.check_alloc)
+    DEFAULT_MAX_BYTES,
+    ENV_MAX_BYTES,
+    fmt_bytes,
+    fmt_count,
+    max_bytes_limit,
+    parse_bytes,
+)
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -33,13 +36,6 @@ __all__ = [
     "fmt_count",
     "fmt_bytes",
 ]
-
-#: Default memory limit of every quantization stage (bytes): 2 GiB. Override per call with
-#: ``max_bytes=`` or for a process with the environment variable :data:`ENV_MAX_BYTES`.
-DEFAULT_MAX_BYTES = 2 * 2**30
-
-#: Environment variable read by :func:`max_bytes_limit` (``"8G"``, ``"512M"``, ``"1e9"``, ...).
-ENV_MAX_BYTES = "KINRED_MAX_BYTES"
 
 #: Bytes kept per point of a 1-D quantization: levels, points and weights (float64 each).
 POINT_BYTES = 24
@@ -68,73 +64,6 @@ def row_work(width: int) -> int:
     """Temporaries per row of a block of atoms whose widest row has ``width`` entries (grid
     digits, the base rows of a push-forward, the projection's work)."""
     return 128 * (width + 4)
-
-_UNITS = {"": 1, "k": 2**10, "m": 2**20, "g": 2**30, "t": 2**40, "p": 2**50}
-_BYTES_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:e[+]?[0-9]+)?)\s*([kmgtp]?)(?:i?b)?\s*$", re.I)
-
-
-def parse_bytes(text, name: str) -> int:
-    """A byte count from ``text``: an integer, a float such as ``1e9``, or a number with a
-    binary suffix ``K``, ``M``, ``G``, ``T``, ``P`` (optionally followed by ``B`` or ``iB``).
-
-    Examples
-    --------
-    >>> parse_bytes("512M", "x"), parse_bytes("2GiB", "x"), parse_bytes("1e9", "x")
-    (536870912, 2147483648, 1000000000)
-    """
-    m = _BYTES_RE.match(str(text))
-    value = float(m.group(1)) * _UNITS[m.group(2).lower()] if m else math.nan
-    if not (math.isfinite(value) and value >= 1):
-        raise InvalidInput(
-            f"{name} must be a byte count >= 1 such as 2147483648, 1e9, 512M or 4G, got {text!r}"
-        )
-    return int(value)
-
-
-def max_bytes_limit(max_bytes=None) -> int:
-    """The memory limit of a quantization stage, in bytes.
-
-    ``max_bytes`` if given (an int, or a string such as ``"4G"``), else the environment
-    variable ``KINRED_MAX_BYTES``, else :data:`DEFAULT_MAX_BYTES` (2 GiB).
-    """
-    if max_bytes is not None:
-        if isinstance(max_bytes, str):
-            return parse_bytes(max_bytes, "max_bytes")
-        return as_int(max_bytes, "max_bytes", low=1)
-    env = os.environ.get(ENV_MAX_BYTES, "").strip()
-    return parse_bytes(env, f"environment variable {ENV_MAX_BYTES}") if env else DEFAULT_MAX_BYTES
-
-
-def fmt_count(n: int) -> str:
-    """An exact integer if it has at most 12 digits, else ``m.mmme+E`` (any size, no ``str(n)``).
-
-    Examples
-    --------
-    >>> fmt_count(123456), fmt_count(50**18), fmt_count(10**1000)
-    ('123456', '3.815e+30', '1.000e+1000')
-    """
-    n = int(n)
-    if n < 10**12:
-        return str(n)
-    if n.bit_length() < 1000:
-        return f"{float(n):.3e}"
-    lg = math.log10(n)  # exact enough: a 1e6-digit count still has ~9 significant digits
-    e = math.floor(lg)
-    m = round(10 ** (lg - e), 3)
-    if m >= 10.0:
-        m, e = m / 10, e + 1
-    return f"{m:.3f}e+{e}"
-
-
-def fmt_bytes(b: int) -> str:
-    """Bytes in binary units (``"4.57 GiB"``), or ``"≈m.mmme+E bytes"`` beyond PiB."""
-    b = int(b)
-    for unit, k in (("PiB", 5), ("TiB", 4), ("GiB", 3), ("MiB", 2), ("KiB", 1)):
-        if b >= 2 ** (10 * k):
-            if k == 5 and b >= 2**60:
-                return f"≈{fmt_count(b)} bytes"
-            return f"{b / 2 ** (10 * k):.3g} {unit}"
-    return f"{b} bytes"
 
 
 def quantile_bytes(points: int, largest: int, empirical: int = 0) -> int:
