@@ -168,13 +168,16 @@ def as_weights(weights, name: str, n: int, *, atol: float = 1e-9) -> np.ndarray:
 
 
 def as_span(t_span, name: str = "t_span") -> tuple[float, float]:
-    """A time interval ``(t0, t1)`` of finite floats with ``t1 > t0``."""
+    """A time interval ``(t0, t1)`` of finite floats with ``t1 > t0`` and a finite length."""
     try:
         t0, t1 = t_span
     except (TypeError, ValueError):
         raise InvalidInput(f"{name} must be a pair (t0, t1), got {_short(t_span)}") from None
     t0 = as_float(t0, f"{name}[0]")
     t1 = as_float(t1, f"{name}[1]", low=t0, low_open=True)
+    if not math.isfinite(t1 - t0):
+        raise InvalidInput(f"{name} must have a finite length t1 - t0 (in float64), got "
+                           f"({t0!r}, {t1!r})")
     return t0, t1
 
 

@@ -88,7 +88,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ._rng import member_seed
-from ._validate import as_choice, as_int
+from ._validate import as_bool, as_choice, as_int, check_alloc, fmt_bytes
 from . import _parallel
 from .errors import DamagedFile, InvalidInput, KinredError, StoreMismatch
 from .io import StageStore, atomic_write_npz, read_npz, to_jsonable
@@ -577,6 +577,7 @@ def _check_run(fn, members, master_seed, executor, workers, scheduler, store, re
     """Validated ``(members, master_seed, executor, workers)`` of a :func:`run_ensemble` call."""
     if not callable(fn):
         raise InvalidInput(f"fn must be callable, got {fn!r}")
+    resume = as_bool(resume, "resume")
     members = _check_members(members)
     master_seed = as_int(master_seed, "master_seed", low=0)
     executor = as_choice(executor, "executor", EXECUTORS)
@@ -601,6 +602,34 @@ def _check_run(fn, members, master_seed, executor, workers, scheduler, store, re
                 f"importable module), got {fn!r}: {exc}"
             ) from None
     return members, master_seed, executor, workers
+
+
+def _result_bytes(res: dict) -> int:
+    """Bytes one member's results keep in memory (arrays by size, other values as small
+    objects)."""
+    return 256 + sum(v.nbytes + 112 if isinstance(v, np.ndarray) else 64 for v in res.values())
+
+
+class _Kept:
+    """The preflight of the results kept in memory: after every computed member the bytes
+    of all ``n`` members, projected from the mean of those held so far, go through
+    :func:`~kinred._validate.check_alloc` (before the remaining members are computed)."""
+
+    def __init__(self, results: list, n: int, store):
+        held = [r for r in results if r is not None]
+        self.count, self.total = len(held), sum(map(_result_bytes, held))
+        self.n, self.store = n, store
+
+    def add(self, res: dict) -> None:
+        self.count += 1
+        self.total += _result_bytes(res)
+        per = self.total // self.count
+        where = ("the finished members are in the store: continue with resume=True after the "
+                 "change" if self.store is not None else "pass store= to keep finished members")
+        check_alloc(per * self.n, f"run_ensemble: keeping the results of {self.n} members",
+                    f"fn returns about {fmt_bytes(per)} per member: return smaller results "
+                    f"(summaries instead of trajectories) or split the member list; {where}",
+                    detail=f" (about {fmt_bytes(per)} per member, measured on {self.count})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -670,6 +699,7 @@ def run_ensemble(
     """
     members, master_seed, executor, workers = _check_run(
         fn, members, master_seed, executor, workers, scheduler, store, resume)
+    progress = as_bool(progress, "progress")
     config_json = _plain(config, "config") if config is not None else None
     chash = config_hash(master_seed, members, getattr(fn, "__qualname__", repr(fn)), config_json)
 
@@ -684,11 +714,13 @@ def run_ensemble(
     if todo:
         stream = _stream(fn, todo, members, master_seed, executor, n_workers, scheduler)
         bar = _make_bar(n, int(loaded.sum()), progress)
+        kept = _Kept(results, n, store)
         try:
             for status, i, payload, extra in stream:
                 if status == "error":
                     raise _failed(i, members[i], payload, extra)
                 stages.save(_member_name(i), (i, members[i], payload, extra), save=_write_member)
+                kept.add(payload)
                 results[i], walls[i] = payload, extra
                 bar.update(1)
         finally:

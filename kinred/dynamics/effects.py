@@ -45,7 +45,7 @@ from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
-from .._validate import as_array, as_choice, as_float
+from .._validate import as_array, as_bool, as_choice, as_float
 from ..errors import InvalidInput, NotProjectable
 from .kernels import CuckerSmale, Morse
 
@@ -191,12 +191,19 @@ class AttractionRepulsion(PairwiseEffect):
     """
 
     def __init__(self, potential: Callable | None = None):
+        _check_potential(potential)
         super().__init__(Morse() if potential is None else potential, source="x", carrier="x",
                          target="v")
         self.potential = self.kernel
 
     def __repr__(self) -> str:
         return f"AttractionRepulsion(potential={self.kernel!r})"
+
+
+def _check_potential(potential) -> None:
+    if potential is not None and not callable(potential):
+        raise InvalidInput(f"potential must be callable (u(s) on an ndarray, e.g. Morse()), "
+                           f"got {potential!r}")
 
 
 class Aggregation(PairwiseEffect):
@@ -214,6 +221,7 @@ class Aggregation(PairwiseEffect):
     """
 
     def __init__(self, potential: Callable | None = None):
+        _check_potential(potential)
         super().__init__(Morse() if potential is None else potential, source="x", carrier="x",
                          target="x")
         self.potential = self.kernel
@@ -365,7 +373,7 @@ class Field(Effect):
             raise InvalidInput(f"fn must be callable fn(t, x, v) -> (N, d) array, got {fn!r}")
         self.fn = fn
         self.target = None if target is None else as_choice(target, "target", ("x", "v"))
-        self.translation_invariant = bool(translation_invariant)
+        self.translation_invariant = as_bool(translation_invariant, "translation_invariant")
 
     def drift(self, x, v, t):
         return np.asarray(self.fn(t, x, v), dtype=float)

@@ -111,7 +111,7 @@ class CuckerSmale:
         self.G = as_float(G, "G", low=0.0)
         self.beta = as_float(beta, "beta", low=0.0)
         n2 = 2.0 * self.beta
-        self._n2 = int(n2) if (n2 == int(n2) and n2 <= 5) else None
+        self._n2 = int(n2) if (n2 <= 5 and n2 == int(n2)) else None  # 2β may be inf
 
     def compiled_form(self) -> tuple[str, float, float]:
         """The closed form for compiled backends (see :data:`kinred.pairsum.COMPILED_KINDS`):

@@ -190,16 +190,20 @@ class Scene:
             self._plans[key] = plan
         return plan
 
-    def _check_state(self, x, v):
-        x = as_array(x, "x", ndim=2)
+    def _check_state(self, x, v, names=("x", "v")):
+        """The validated state; ``names`` name the arguments in messages (``x0, v0``)."""
+        nx, nv = names
+        x = as_array(x, nx, ndim=2)
         if x.shape[0] < 1 or x.shape[1] < 1:
-            raise InvalidInput(f"x must have at least one agent and one dimension, got {x.shape}")
+            raise InvalidInput(f"{nx} must have at least one agent and one dimension, got {x.shape}")
         if self.order == 2:
             if v is None:
-                raise InvalidInput("v must be given for a second-order scene (order 2)")
-            v = as_array(v, "v", shape=x.shape)
+                raise InvalidInput(f"{nv} must be given for a second-order scene (order 2)")
+            v = as_array(v, nv, ndim=2)
+            if v.shape != x.shape:
+                raise InvalidInput(f"{nv} must have the shape of {nx}, {x.shape}, got {v.shape}")
         elif v is not None:
-            raise InvalidInput("v must be None for a first-order scene (order 1), got an array")
+            raise InvalidInput(f"{nv} must be None for a first-order scene (order 1), got an array")
         if self.weights is not None:
             self.agent_weights(x.shape[0])
         return x, v

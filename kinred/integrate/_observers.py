@@ -25,7 +25,7 @@ Examples
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import AbstractSet, Mapping, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -103,6 +103,10 @@ def as_observers(observers, method: str | None = None) -> list:
     ``method``, an observer whose ``methods`` attribute does not name it is refused."""
     if observers is None:
         return []
+    if isinstance(observers, (Mapping, AbstractSet, str, bytes)):  # dict.update is no observer
+        raise InvalidInput(f"observers must be a callable obs(t, state, scene), an object with "
+                           f"update(t, state, scene), or a sequence of them; got a "
+                           f"{type(observers).__name__} {observers!r}")
     if callable(observers) or hasattr(observers, "update") or hasattr(observers, "init"):
         observers = [observers]
     try:
@@ -114,7 +118,7 @@ def as_observers(observers, method: str | None = None) -> list:
     out = []
     for i, o in enumerate(items):
         update = o if callable(o) else getattr(o, "update", None)
-        update = update if callable(update) else None
+        update = update if callable(update) and not isinstance(o, (Mapping, AbstractSet)) else None
         init = getattr(o, "init", None)
         if update is None or (init is not None and not callable(init)):
             raise InvalidInput(f"observers[{i}] = {o!r} is not an observer: it must be callable "

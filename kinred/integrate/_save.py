@@ -16,10 +16,15 @@ from typing import Any, Mapping, NamedTuple
 import numpy as np
 
 from .. import observables as _obs
-from .._validate import as_array, as_int
+from .._validate import as_array, as_int, check_alloc, fmt_count
 from ..errors import InvalidInput
 
-__all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder"]
+__all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_save_size"]
+
+#: Bytes per save point of the grid (times, step indices and their sorting temporaries) and
+#: per recorded observable value (a small array object and its list slot) besides its data.
+GRID_POINT_BYTES = 64
+OBS_VALUE_BYTES = 128
 
 _BUILTIN = {
     "gamma": (2, lambda t, x, v, w: _obs.gamma(v, w)),
@@ -67,7 +72,8 @@ class SaveAt:
         if self.t is not None:
             t = np.sort(as_array(self.t, "t", ndim=1))
             object.__setattr__(self, "t", t)
-        if self.states not in (True, False, "x", "v"):
+        if not (isinstance(self.states, (bool, np.bool_)) or
+                (isinstance(self.states, str) and self.states in ("x", "v"))):
             raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {self.states!r}")
 
 
@@ -94,6 +100,31 @@ def observable_list(spec, order: int) -> list:
         else:
             raise InvalidInput(f"observables must be names or callables, got {s!r}")
     return out
+
+
+def save_points(save: SaveAt, t0: float, t1: float, dt: float, n_steps: int | None) -> int:
+    """An upper bound of the number of save points of a run (nothing is built)."""
+    if save.t is not None:
+        return len(save.t) + 2
+    every = save.every or 1
+    if n_steps is not None:
+        return n_steps // every + 2
+    return int(math.floor((t1 - t0) / (every * dt) + 1e-9)) + 2
+
+
+def check_save_size(save: SaveAt, n_save: int, shape: tuple, order: int, n_obs: int,
+                    what: str = "simulate") -> None:
+    """:func:`~kinred._validate.check_alloc` of what a run records: the save grid, the
+    observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d`` entries) and
+    the states ``(T, N, d)`` requested by ``save.states``."""
+    n, d = shape
+    n_states = int(save.states in (True, "x")) + int(save.states in (True, "v") and order == 2)
+    per_point = GRID_POINT_BYTES + n_obs * (OBS_VALUE_BYTES + 16 * d) + 8 * n * d * n_states
+    states = f", states (T, N, d) = ({fmt_count(n_save)}, {n}, {d}) x {n_states}" if n_states else ""
+    check_alloc(n_save * per_point, f"{what}: recording {fmt_count(n_save)} save points",
+                "save fewer points (SaveAt(every=...) or fewer times t), fewer states "
+                "(SaveAt(states=False, 'x' or 'v')) or a shorter t_span",
+                detail=f" ({n_obs} observables{states})")
 
 
 class SaveGrid(NamedTuple):

@@ -24,7 +24,8 @@ from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
 from ._observers import Progress, as_observers, state_view
 from ._registry import SOLVERS
-from ._save import Recorder, SaveAt, SaveGrid, observable_list, save_grid
+from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
+                    save_points)
 from ._solvers import VectorField
 
 __all__ = ["simulate", "Trajectory"]
@@ -234,9 +235,12 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     """Validate the arguments of :func:`simulate` (before any allocation) and build the run."""
     if not isinstance(scene, Scene):
         raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
-    x0, v0 = scene._check_state(x0, v0)
+    x0, v0 = scene._check_state(x0, v0, ("x0", "v0"))
     t0, t1 = as_span(t_span)
     dt = as_float(dt, "dt", low=0.0, low_open=True)
+    if not (t1 - t0) / dt <= 2.0**53:  # beyond it t0 + n·dt is no grid (and may be inf)
+        raise InvalidInput(f"dt must be at least (t1 - t0)/2**53 = {(t1 - t0) / 2.0**53:.3g} "
+                           f"for t_span = ({t0!r}, {t1!r}), got dt = {dt!r}")
     method = as_choice(method, "method", SOLVERS)
     spec = SOLVERS[method]
     if scene.stochastic and not spec.stochastic:
@@ -254,6 +258,8 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     solver = spec.make()
     control = (adaptive if spec.adaptive else ConstantStep()).init(solver, t0, t1, dt, method)
     n_steps = None if spec.adaptive else control.n_steps
+    check_save_size(save, save_points(save, t0, t1, dt, n_steps), x0.shape, scene.order,
+                    len(obs))
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 

@@ -43,7 +43,7 @@ import scipy.fft
 import scipy.sparse
 
 from .._rng import as_generator
-from .._validate import as_array, as_choice, as_int
+from .._validate import as_array, as_choice, as_int, check_alloc
 from ..errors import InvalidInput
 from ._base import DenseProjection, Projection
 
@@ -307,6 +307,7 @@ def jl_matrix(k: int, d: int, kind: str = "gaussian", seed=None) -> Projection:
     k = as_int(k, "k", low=1)
     d = as_int(d, "d", low=1)
     kind = as_choice(kind, "kind", KINDS)
+    _check_size(k, d, kind)
     rng = as_generator(seed)
     stored_seed = seed if (seed is None or isinstance(seed, numbers.Integral)) else repr(seed)
     if kind == "gaussian":
@@ -334,6 +335,25 @@ def jl_matrix(k: int, d: int, kind: str = "gaussian", seed=None) -> Projection:
     signs = np.where(rng.integers(0, 2, size=d) == 1, 1.0, -1.0)
     rows = np.sort(rng.choice(d_pad, size=k, replace=False))
     return SRHTProjection(signs, rows, transform=transform, kind=kind, seed=stored_seed)
+
+
+#: Peak bytes per entry of a ``(k, d)`` matrix while it is drawn: float64 entries (gaussian);
+#: int8 bits, the ±1 array and the scaled copy (rademacher); int8 draws, boolean masks, the
+#: dense values and the CSR arrays of about a third of them (achlioptas).
+_ENTRY_BYTES = {"gaussian": 8, "rademacher": 17, "achlioptas": 16}
+
+
+def _check_size(k: int, d: int, kind: str) -> None:
+    """:func:`~kinred._validate.check_alloc` of :func:`jl_matrix` before anything is drawn."""
+    if kind in _ENTRY_BYTES:
+        need, arrays = _ENTRY_BYTES[kind] * k * d, f"a dense ({k}, {d}) matrix"
+    else:  # signs (d,), the padded transform's row choice (d'), the rows (k,)
+        d_pad = 1 << (d - 1).bit_length() if kind == "srht" else d
+        need, arrays = 8 * (d + 2 * d_pad) + 16 * k, f"signs ({d},) and a row choice of {d_pad}"
+    check_alloc(need, f"jl_matrix(k={k}, d={d}, kind={kind!r})",
+                "a smaller k (kinred.projection.jl_min_dim gives the k a distortion needs) or "
+                "a structured kind ('srht', 'dct': O(d) memory)" if kind in _ENTRY_BYTES else
+                "a smaller d", detail=f" for {arrays}")
 
 
 def jl_min_dim(n_points, eps):

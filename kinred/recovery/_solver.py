@@ -67,7 +67,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._parallel import get_num_threads, run_parallel
-from .._validate import as_array, as_float, as_int
+from .._validate import as_array, as_bool, as_float, as_int, check_alloc
 from ..errors import InvalidInput
 from ..projection import Projection, as_projection
 from ._kernels import admm_step
@@ -181,35 +181,39 @@ def stack_projections(projections) -> np.ndarray:
     >>> stack_projections([np.eye(2, 3), np.ones((1, 3))]).shape
     (3, 3)
     """
+    return _stack(projections, "projections")
+
+
+def _stack(projections, name: str) -> np.ndarray:
+    """:func:`stack_projections`, naming the argument ``name`` in messages."""
     if isinstance(projections, Projection):
         return np.asarray(projections.to_dense(), dtype=float)
     if isinstance(projections, np.ndarray) and projections.ndim == 2:
-        return as_array(projections, "A", ndim=2)
+        return as_array(projections, name, ndim=2)
     if isinstance(projections, (list, tuple)):
         if len(projections) == 0:
-            raise InvalidInput("projections must hold at least one projection, got an empty sequence")
+            raise InvalidInput(f"{name} must hold at least one projection, got an empty sequence")
         mats = []
         for i, P in enumerate(projections):
             if not isinstance(P, Projection):
-                P = as_array(P, f"projections[{i}]", ndim=2)
+                P = as_array(P, f"{name}[{i}]", ndim=2)
             M = np.asarray(as_projection(P).to_dense(), dtype=float)
             if not np.all(np.isfinite(M)):
-                raise InvalidInput(f"projections[{i}] must be finite")
+                raise InvalidInput(f"{name}[{i}] must be finite")
             mats.append(M)
         d0 = mats[0].shape[1]
         for i, M in enumerate(mats):
             if M.shape[1] != d0:
                 raise InvalidInput(
-                    f"all projections must have the same source dimension d; projections[0] has "
-                    f"d = {d0} but projections[{i}] has shape {M.shape}"
+                    f"all {name} must have the same source dimension d; {name}[0] has "
+                    f"d = {d0} but {name}[{i}] has shape {M.shape}"
                 )
         return np.vstack(mats)
-    A = as_array(projections, "A", ndim=2)
-    return A
+    return as_array(projections, name, ndim=2)
 
 
 def _check_A(A) -> np.ndarray:
-    A = stack_projections(A)
+    A = _stack(A, "A")
     if A.shape[0] < 1 or A.shape[1] < 1:
         raise InvalidInput(f"A must have at least one row and one column, got shape {A.shape}")
     return np.ascontiguousarray(A, dtype=float)
@@ -277,9 +281,9 @@ class _Options:
         cert_tol = as_float(cert_tol, "cert_tol", low=0.0)
         if mu0 is not None:
             mu0 = as_float(mu0, "mu0", low=0.0, low_open=True)
-        return cls(nonneg=bool(nonneg), tol=tol, max_iter=max_iter, polish=bool(polish),
-                   relax=relax, check_every=check_every, cert_tol=cert_tol, mu0=mu0,
-                   adaptive=bool(adaptive))
+        return cls(nonneg=as_bool(nonneg, "nonneg"), tol=tol, max_iter=max_iter,
+                   polish=as_bool(polish, "polish"), relax=relax, check_every=check_every,
+                   cert_tol=cert_tol, mu0=mu0, adaptive=as_bool(adaptive, "adaptive"))
 
 
 def _validated_solve(form: str, A, Y, param, param_name: str, **options) -> RecoveryResult:
@@ -288,7 +292,20 @@ def _validated_solve(form: str, A, Y, param, param_name: str, **options) -> Reco
     A = _check_A(A)
     Y = _check_Y(Y, A.shape[0])
     param = _check_param(param, Y.shape[1], param_name)
-    return _solve(A, Y, param, form, _Options.validated(**options))
+    opts = _Options.validated(**options)
+    _check_size(A.shape, Y.shape[1], "basis_pursuit" if form == "bpdn" else "lasso")
+    return _solve(A, Y, param, form, opts)
+
+
+def _check_size(shape: tuple, n_rhs: int, call: str) -> None:
+    """Preflight of the solver's arrays: ``ÂᵀÂ (d, d)``, ``U (m, m)``, ``Â, UᵀÂ`` and its
+    transpose ``(m, d)`` each, the iterates ``(n_rhs, 6d + 5m)`` and their sign patterns."""
+    m, d = shape
+    need = 8 * (d * d + m * m + 3 * m * d) + n_rhs * (8 * (6 * d + 5 * m) + d)
+    check_alloc(need, f"{call}: A of shape ({m}, {d}) with {n_rhs} right-hand sides",
+                "the solver keeps A^T A (d, d) and iterates (n_rhs, d): pass fewer columns of Y "
+                "per call or a matrix with fewer columns d",
+                detail=" (A^T A, the factorization and the ADMM iterates)")
 
 
 # ---------------------------------------------------------------------------------------------
