@@ -42,13 +42,16 @@ distributions, invalid parameters, NaN, empty or reversed supports and bad weigh
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
 import os
+import re
 
 import numpy as np
 from scipy import stats
 
+from .._validate import _short
 from ..errors import ConfigError, InvalidInput
 from ._base import Dirac, Measure
 from ._composite import Mixture, TensorProduct
@@ -65,9 +68,19 @@ def _err(source: str, key: str, msg: str) -> ConfigError:
     return ConfigError(f"{source}: {key}: {msg}")
 
 
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def _key_text(key) -> str:
+    """A key as TOML writes it (quoted when it is not bare), so messages stay on one line."""
+    if isinstance(key, str) and _BARE_KEY.match(key):
+        return key
+    return json.dumps(key) if isinstance(key, str) else repr(key)
+
+
 def _number(value, source, key) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise _err(source, key, f"must be a number, got {value!r}")
+        raise _err(source, key, f"must be a number, got {_short(value)}")
     v = float(value)
     if not math.isfinite(v):
         raise _err(source, key, f"must be finite, got {v}")
@@ -76,11 +89,11 @@ def _number(value, source, key) -> float:
 
 def _check_keys(table, allowed, source, where):
     if not isinstance(table, dict):
-        raise _err(source, where, f"must be a table, got {table!r}")
-    unknown = sorted(set(table) - allowed)
+        raise _err(source, where, f"must be a table, got {_short(table)}")
+    unknown = sorted(set(table) - allowed, key=str)
     if unknown:
         raise _err(
-            source, f"{where}.{unknown[0]}" if where else unknown[0],
+            source, f"{where}.{_key_text(unknown[0])}" if where else _key_text(unknown[0]),
             f"unknown key; valid keys are {', '.join(sorted(allowed))}",
         )
 
@@ -127,7 +140,7 @@ def _coordinates(tables, source, where) -> list[Measure]:
         _check_keys(t, _COORD_KEYS, source, key)
         repeat = t.get("repeat", 1)
         if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
-            raise _err(source, f"{key}.repeat", f"must be an integer >= 1, got {repeat!r}")
+            raise _err(source, f"{key}.repeat", f"must be an integer >= 1, got {_short(repeat)}")
         decay = _number(t.get("decay", 1.0), source, f"{key}.decay")
         if decay <= 0:
             raise _err(source, f"{key}.decay", f"must be > 0, got {decay}")
@@ -135,7 +148,7 @@ def _coordinates(tables, source, where) -> list[Measure]:
             raise _err(source, f"{key}.dist", "missing (a scipy.stats distribution name or 'dirac')")
         name = t["dist"]
         if not isinstance(name, str):
-            raise _err(source, f"{key}.dist", f"must be a string, got {name!r}")
+            raise _err(source, f"{key}.dist", f"must be a string, got {_short(name)}")
         if name == "dirac":
             for bad in ("params", "support"):
                 if bad in t:
@@ -151,12 +164,17 @@ def _coordinates(tables, source, where) -> list[Measure]:
         if not isinstance(gen, stats.rv_continuous):
             raise _err(
                 source, f"{key}.dist",
-                f"unknown distribution {name!r}: use a scipy.stats continuous distribution "
+                f"unknown distribution {_short(name)}: use a scipy.stats continuous distribution "
                 "name (e.g. 'uniform', 'beta', 'norm', 'truncnorm') or 'dirac'",
             )
         params = t.get("params", {})
         if not isinstance(params, dict):
-            raise _err(source, f"{key}.params", f"must be a table, got {params!r}")
+            raise _err(source, f"{key}.params", f"must be a table, got {_short(params)}")
+        for k in params:
+            if not (isinstance(k, str) and k.isidentifier()):
+                raise _err(source, f"{key}.params.{_key_text(k)}",
+                           f"not a parameter of {name} (parameter names are identifiers such as "
+                           "loc, scale, a)")
         pvals = {k: _number(v, source, f"{key}.params.{k}") for k, v in params.items()}
         if name == "uniform":
             pvals = _uniform_params(pvals, source, key)
@@ -170,7 +188,7 @@ def _coordinates(tables, source, where) -> list[Measure]:
         if "support" in t:
             s = t["support"]
             if not (isinstance(s, list) and len(s) == 2):
-                raise _err(source, f"{key}.support", f"must be [a, b], got {s!r}")
+                raise _err(source, f"{key}.support", f"must be [a, b], got {_short(s)}")
             a = _number(s[0], source, f"{key}.support[0]")
             b = _number(s[1], source, f"{key}.support[1]")
             if not a < b:

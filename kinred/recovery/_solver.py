@@ -657,23 +657,38 @@ def _sweep(system: _System, batch: _Batch, out: _Columns, form: str, opts: _Opti
 # the solver: setup, trivial columns, sweep, finalize
 
 
-def _finalize(A, Y, param, form, opts: _Options, out: _Columns, infeasible, t0) -> RecoveryResult:
-    """Residuals and objectives in the original scaling."""
+def _exponent(X) -> int:
+    """``e`` with ``max |X| · 2^−e`` in ``[1/2, 1)`` (0 for ``X = 0``)."""
+    top = float(np.max(np.abs(X), initial=0.0))
+    return int(np.frexp(top)[1]) if top > 0 else 0
+
+
+def _finalize(A, Y, param, form, opts: _Options, out: _Columns, infeasible, t0,
+              scaling) -> RecoveryResult:
+    """Residuals and objectives of the scaled problem, then everything in the original
+    scaling ``(ea, ey, param)``: ``Z·2^(ey−ea)``, residuals ``·2^ey``, objectives
+    ``·2^(ey−ea)`` (BPDN) or ``·2^(2ey)`` (LASSO)."""
+    ea, ey, param0 = scaling
     R = A @ np.where(np.isfinite(out.Z), out.Z, 0.0) - Y
     residual = np.linalg.norm(R, axis=0)
     residual[infeasible] = np.nan
     l1 = np.sum(np.abs(out.Z), axis=0)
-    if form == "lasso":
-        objective = 0.5 * residual**2 + param * l1
-    else:
-        objective = np.where(~infeasible, l1, np.nan)
+    with np.errstate(over="ignore"):
+        if form == "lasso":
+            objective = np.ldexp(0.5 * residual**2 + param * l1, 2 * ey)
+        else:
+            objective = np.ldexp(np.where(~infeasible, l1, np.nan), ey - ea)
+        Z = np.ldexp(out.Z, ey - ea)
+    if np.any(np.isinf(Z)):
+        raise InvalidInput(f"A (entries up to 2^{ea}) and Y (up to 2^{ey}) have a solution "
+                           "beyond the float64 range: rescale A or Y (z scales as Y/A)")
     return RecoveryResult(
-        Z=out.Z,
+        Z=Z,
         status=out.status,
         iterations=out.iterations,
-        residual=residual,
+        residual=np.ldexp(residual, ey),
         objective=objective,
-        param=param,
+        param=param0,
         gap=out.gap,
         primal_residual=out.primal,
         dual_residual=out.dual,
@@ -688,6 +703,11 @@ def _solve(A, Y, param, form: str, opts: _Options) -> RecoveryResult:
     """Solve all columns of ``Y`` (validated inputs; ``form`` ``"bpdn"`` or ``"lasso"``)."""
     t0 = time.perf_counter()
     m, d = A.shape
+    # the problem is homogeneous: solve it for A, Y scaled by powers of two (exact) to
+    # entries below 1, so that A Aᵀ, norms and residuals neither overflow nor underflow
+    ea, ey, param0 = _exponent(A), _exponent(Y), param
+    A, Y = np.ldexp(A, -ea), np.ldexp(Y, -ey)
+    param = np.ldexp(param, -ey if form == "bpdn" else -ea - ey)
     out = _Columns(d, Y.shape[1])
     spec = _spectrum(A)
     ynorm = np.linalg.norm(Y, axis=0)
@@ -697,7 +717,7 @@ def _solve(A, Y, param, form: str, opts: _Options) -> RecoveryResult:
     if active.size:
         system, batch = _start(Y, param, form, spec, active, ynorm, opts.mu0)
         _sweep(system, batch, out, form, opts)
-    return _finalize(A, Y, param, form, opts, out, infeasible, t0)
+    return _finalize(A, Y, param, form, opts, out, infeasible, t0, (ea, ey, param0))
 
 
 _COMMON_DOC = """
