@@ -76,6 +76,13 @@ class SaveAt:
                 (isinstance(self.states, str) and self.states in ("x", "v"))):
             raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {self.states!r}")
 
+    def describe(self) -> str:
+        """A one-line summary for messages (``SaveAt(t=<500 times>, states=True)``)."""
+        parts = [f"every={self.every}"] if self.every is not None else []
+        parts += [f"t=<{len(self.t)} times>"] if self.t is not None else []
+        parts += [f"states={self.states!r}"] if self.states is not False else []
+        return f"SaveAt({', '.join(parts)})"
+
 
 def observable_list(spec, order: int) -> list:
     """``[(name, fn(t, x, v, weights))]`` of a :class:`SaveAt`'s ``observables``."""
@@ -112,18 +119,21 @@ def save_points(save: SaveAt, t0: float, t1: float, dt: float, n_steps: int | No
     return int(math.floor((t1 - t0) / (every * dt) + 1e-9)) + 2
 
 
+_SAVE_HINT = ("save fewer points (SaveAt(every=...) or fewer times t), fewer states "
+              "(SaveAt(states=False, 'x' or 'v')) or a shorter t_span")
+
+
 def check_save_size(save: SaveAt, n_save: int, shape: tuple, order: int, n_obs: int,
-                    what: str = "simulate") -> None:
+                    call: str, hint: str = _SAVE_HINT) -> None:
     """:func:`~kinred._validate.check_alloc` of what a run records: the save grid, the
     observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d`` entries) and
-    the states ``(T, N, d)`` requested by ``save.states``."""
+    the states ``(T, N, d)`` requested by ``save.states``; ``call`` names the run's
+    arguments in the message."""
     n, d = shape
     n_states = int(save.states in (True, "x")) + int(save.states in (True, "v") and order == 2)
     per_point = GRID_POINT_BYTES + n_obs * (OBS_VALUE_BYTES + 16 * d) + 8 * n * d * n_states
     states = f", states (T, N, d) = ({fmt_count(n_save)}, {n}, {d}) x {n_states}" if n_states else ""
-    check_alloc(n_save * per_point, f"{what}: recording {fmt_count(n_save)} save points",
-                "save fewer points (SaveAt(every=...) or fewer times t), fewer states "
-                "(SaveAt(states=False, 'x' or 'v')) or a shorter t_span",
+    check_alloc(n_save * per_point, f"{call}: recording {fmt_count(n_save)} save points", hint,
                 detail=f" ({n_obs} observables{states})")
 
 

@@ -259,7 +259,8 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     control = (adaptive if spec.adaptive else ConstantStep()).init(solver, t0, t1, dt, method)
     n_steps = None if spec.adaptive else control.n_steps
     check_save_size(save, save_points(save, t0, t1, dt, n_steps), x0.shape, scene.order,
-                    len(obs))
+                    len(obs), f"simulate(x0 of shape {x0.shape}, t_span=({t0:g}, {t1:g}), "
+                              f"dt={dt:g}, save={save.describe()})")
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 

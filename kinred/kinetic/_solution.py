@@ -167,6 +167,25 @@ def _save_spec(t_span, dt, method, times, save_every):
     return SaveAt(states=True, observables=())
 
 
+def _check_trajectory(n: int, d: int, t_span, dt, method, save) -> None:
+    """The preflight of the states ``(T, n, d)`` that :func:`solve` saves (as
+    :func:`~kinred.integrate.simulate` will check them), before the atoms are built."""
+    from ..integrate import SOLVERS
+    from ..integrate._save import check_save_size, save_points
+
+    spec = SOLVERS.get(method) if isinstance(method, str) else None
+    t0, t1 = t_span
+    steps = (t1 - t0) / dt
+    if spec is None or not steps <= 2.0**53:
+        return  # simulate names the bad method or step
+    n_steps = None if spec.adaptive else max(1, int(round(steps)))
+    check_save_size(save, save_points(save, t0, t1, dt, n_steps), (n, d), 2, 0,
+                    f"solve(mu0 quantized to {n} atoms in R^(2·{d}), t_span=({t0:g}, {t1:g}), "
+                    f"dt={dt:g}, times/save_every: {save.describe()})",
+                    "save fewer times (save_every=, times=), fewer atoms (larger eps, smaller "
+                    "atoms) or a shorter t_span")
+
+
 def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
           t_span=(0.0, 1.0), dt: float = 0.01, method: str = "euler", times=None,
           save_every: int | None = None, rule: str = "midpoint", max_atoms: int = 200_000,
@@ -242,6 +261,9 @@ def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
         bound = 0.0
     else:
         q = quantize(mu0, eps=eps, atoms=atoms, rule=rule)
+        if q.n_atoms <= max_atoms:  # the trajectory's size, before the atoms are built
+            _check_trajectory(int(q.n_atoms), mu0.dim // 2, t_span, dt, method,
+                              _save_spec(t_span, dt, method, times, save_every))
         at = q.materialize(max_atoms=max_atoms)
         bound = float(q.bound)
     t_quant = time.perf_counter() - t0

@@ -14,11 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._validate import check_alloc
 from ..errors import InvalidInput
 from . import _kernels
 from ._base import PairTerms, check_plan_args
 
 __all__ = ["Numpy", "NumpyPlan"]
+
+#: Peak bytes per pair of an evaluation: distances, their roots, the kernel values and its
+#: temporaries, the weighted copy (about six ``(N, N)`` float64 arrays).
+_PAIR_BYTES = 48
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,6 +59,9 @@ class Numpy:
         """The plan of ``scene`` for states of shape ``(n, dim)`` (see
         :class:`~kinred.pairsum.PairSum`)."""
         terms, n, dim = check_plan_args(scene, n, dim)
+        check_alloc(_PAIR_BYTES * n * n, f"the numpy pair sums of {n} agents",
+                    "use the default backend pairsum='dense' (O(N) memory)",
+                    detail=f" for about {_PAIR_BYTES // 8} (N, N) = ({n}, {n}) matrices")
         return NumpyPlan(n=n, dim=dim, terms=terms, c=scene.coefficients(n))
 
     def evaluate(self, plan: NumpyPlan, x: np.ndarray, v: np.ndarray | None, rng=None) -> dict:
