@@ -16,6 +16,7 @@ import numbers
 
 import numpy as np
 
+from ._validate import _short
 from .errors import InvalidInput
 
 __all__ = ["as_generator", "member_seed", "member_generator", "SeedLike"]
@@ -51,7 +52,7 @@ def as_generator(seed=None) -> np.random.Generator:
         return np.random.default_rng(int(seed))
     raise InvalidInput(
         "seed must be None, a non-negative int, a numpy SeedSequence or a numpy Generator, "
-        f"got {seed!r} of type {type(seed).__name__}"
+        f"got {_short(seed)} of type {type(seed).__name__}"
     )
 
 

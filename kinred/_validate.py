@@ -46,7 +46,8 @@ __all__ = [
 
 
 def _short(value) -> str:
-    r = repr(value)
+    """``repr(value)`` on one line (arrays print several), at most 80 characters."""
+    r = " ".join(repr(value).split())
     return r if len(r) <= 80 else r[:77] + "..."
 
 

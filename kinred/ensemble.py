@@ -199,6 +199,10 @@ def grid(**axes) -> list[dict]:
 def _check_members(members) -> list[dict]:
     if isinstance(members, (str, bytes, Mapping)) or not isinstance(members, Iterable):
         raise InvalidInput(f"members must be a list of dicts, got {type(members).__name__}")
+    try:
+        members = list(members)
+    except TypeError:  # a 0-d array
+        raise InvalidInput(f"members must be a list of dicts, got {members!r}") from None
     out = []
     for i, m in enumerate(members):
         if not isinstance(m, Mapping):

@@ -10,6 +10,8 @@ The subclasses also derive from the closest built-in exception (``ValueError``,
 
 from __future__ import annotations
 
+import re
+
 __all__ = [
     "KinredError",
     "InvalidInput",
@@ -25,7 +27,19 @@ __all__ = [
 
 
 class KinredError(Exception):
-    """Base class of every error raised by kinred."""
+    """Base class of every error raised by kinred.
+
+    The message is one line: a line break and the spaces around it (e.g. from the ``repr``
+    of an array named in the message) become one space.
+    """
+
+    def __init__(self, *args):
+        if len(args) == 1 and isinstance(args[0], str) and ("\n" in args[0] or "\r" in args[0]):
+            args = (_LINE_BREAK.sub(" ", args[0]),)
+        super().__init__(*args)
+
+
+_LINE_BREAK = re.compile(r"\s*[\r\n]\s*")
 
 
 class InvalidInput(KinredError, ValueError):

@@ -166,6 +166,7 @@ class Alignment(PairwiseEffect):
     """
 
     def __init__(self, kernel: Callable | None = None, *, on: str = "x"):
+        on = as_choice(on, "on", ("x", "v"))
         super().__init__(CuckerSmale() if kernel is None else kernel, source=on, carrier="v",
                          target="v")
 
@@ -301,6 +302,9 @@ class Noise(Effect):
         """``σ ΔW`` over a step ``dt`` for ``n`` agents in ``ℝ^dim``: ``(n, dim)``."""
         if self.matrix is None:
             return (self.sigma * np.sqrt(dt)) * rng.standard_normal((n, dim))
+        if self.matrix.shape[0] != dim:
+            raise InvalidInput(f"matrix must have {dim} rows (the dimension of the state it "
+                               f"perturbs), got shape {self.matrix.shape}")
         xi = rng.standard_normal((n, self.matrix.shape[1]))
         return (self.sigma * np.sqrt(dt)) * (xi @ self.matrix.T)
 

@@ -123,7 +123,10 @@ class Scene:
                  precision: str | None = None):
         if isinstance(effects, Effect) or not hasattr(effects, "__iter__"):
             effects = [effects]
-        effects = tuple(effects)
+        try:
+            effects = tuple(effects)
+        except TypeError:  # a 0-d array has __iter__ but cannot be iterated
+            raise InvalidInput(f"effects must be a sequence of Effects, got {effects!r}") from None
         if not effects:
             raise InvalidInput("effects must contain at least one effect, got an empty sequence")
         for i, e in enumerate(effects):
@@ -134,8 +137,10 @@ class Scene:
                         "(see kinred.dynamics.Effect)")
         self.effects = effects
         self.normalize = as_choice(normalize, "normalize", ("mean", "sum"))
-        self.weights = None if weights is None else as_weights(weights, "weights",
-                                                               len(np.atleast_1d(weights)))
+        if weights is not None:
+            weights = as_array(weights, "weights", ndim=1)
+            weights = as_weights(weights, "weights", len(weights))
+        self.weights = weights
         self.pairsum = as_pairsum(pairsum, engine=engine, block=block, precision=precision)
         targets = {e.target for e in effects}
         if "x" in targets:

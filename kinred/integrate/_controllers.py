@@ -83,8 +83,8 @@ class ConstantStep:
         nf = span / dt
         n_steps = int(round(nf))
         if n_steps < 1 or abs(n_steps - nf) > 1e-9 * max(1.0, nf):
-            raise InvalidInput(f"(t1 - t0)/dt must be a positive integer for method={method!r}, "
-                               f"got {span!r}/{dt!r} = {nf!r}")
+            raise InvalidInput(f"t_span and dt: (t1 - t0)/dt must be a positive integer for "
+                               f"method={method!r}, got {span!r}/{dt!r} = {nf!r}")
         return _Constant(t0, dt, n_steps)
 
 

@@ -125,7 +125,7 @@ def energy_budget(scene, n: int, dim: int) -> Budget | None:
                 b.kappa += 0.5
                 b.why.append("a drift c adds at most |c|² + Q per unit time")
         elif isinstance(e, Noise) and scene._tgt(e) == "v":
-            rate = e.sigma ** 2 * (dim if e.matrix is None else float(np.sum(e.matrix ** 2)))
+            rate = e.sigma * e.sigma * (dim if e.matrix is None else float(np.sum(e.matrix ** 2)))
             b.p += rate
             b.why.append(f"noise adds σ²·tr(MMᵀ) = {rate:.3g} per unit time in expectation")
         else:

@@ -16,7 +16,7 @@ from typing import Any, Mapping, NamedTuple
 import numpy as np
 
 from .. import observables as _obs
-from .._validate import as_array, as_int, check_alloc, fmt_count
+from .._validate import _short, as_array, as_int, check_alloc, fmt_count
 from ..errors import InvalidInput
 
 __all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_save_size"]
@@ -88,19 +88,26 @@ def observable_list(spec, order: int) -> list:
     """``[(name, fn(t, x, v, weights))]`` of a :class:`SaveAt`'s ``observables``."""
     if spec is None:
         spec = ("gamma", "lambda") if order == 2 else ("lambda",)
-    items = list(spec.items()) if isinstance(spec, Mapping) else [
-        (s if isinstance(s, str) else getattr(s, "__name__", f"obs{i}"), s)
-        for i, s in enumerate(spec)]
+    if isinstance(spec, str) or callable(spec):
+        spec = (spec,)
+    try:
+        items = list(spec.items()) if isinstance(spec, Mapping) else [
+            (s if isinstance(s, str) else getattr(s, "__name__", f"obs{i}"), s)
+            for i, s in enumerate(spec)]
+    except TypeError:
+        raise InvalidInput(f"observables must be a sequence or mapping of names and callables, "
+                           f"got {_short(spec)}") from None
     out = []
     for name, s in items:
         if isinstance(s, str):
             if s not in _BUILTIN:
-                raise InvalidInput(f"observable {s!r} is unknown; valid names: "
+                raise InvalidInput(f"observables: {s!r} is unknown; valid names: "
                                    f"{', '.join(map(repr, _BUILTIN))} or a callable "
                                    f"fn(t, x, v, weights)")
             need, fn = _BUILTIN[s]
             if need == 2 and order == 1:
-                raise InvalidInput(f"observable {s!r} needs velocities; the scene is first-order")
+                raise InvalidInput(f"observables: {s!r} needs velocities; the scene is "
+                                   "first-order")
             out.append((name, fn))
         elif callable(s):
             out.append((name, s))

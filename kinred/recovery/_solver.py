@@ -60,6 +60,7 @@ polished solution is exact up to round-off. Supports that fail the certificate a
 
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass, fields
 from typing import NamedTuple
@@ -231,7 +232,7 @@ def _check_Y(Y, m: int) -> np.ndarray:
 
 
 def _check_param(value, n: int, name: str) -> np.ndarray:
-    if np.ndim(value) == 0:
+    if isinstance(value, (numbers.Number, np.generic)) or value is None:
         v = as_float(value, name, low=0.0)
         return np.full(n, v)
     arr = as_array(value, name, ndim=1)
