@@ -39,8 +39,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ._validate import _short
-from .errors import ConfigError, InvalidInput
+from ._validate import _short, check_alloc, fmt_count
+from .errors import ConfigError, InvalidInput, TooLarge
 
 __all__ = ["Key", "REQUIRED", "EffectType", "PairSumType", "EFFECTS", "PAIRSUMS", "TABLES",
            "register_effect", "unregister_effect", "register_pairsum", "unregister_pairsum",
@@ -655,6 +655,8 @@ class Config:
                 mu = lift(mu, self.lift_to, seed=self.lift_seed)
             except InvalidInput as exc:
                 raise ConfigError(f"{self.source}: initial.lift_to: {exc}") from None
+            except TooLarge as exc:
+                raise TooLarge(f"{self.source}: initial.lift_to: {exc}") from None
         if mu.dim != 2 * self.d:
             raise ConfigError(f"{self.source}: dynamics.d: is {self.d} but the initial measure "
                               f"lives on R^{mu.dim // 2} (positions) after lifting")
@@ -663,6 +665,9 @@ class Config:
     def times(self) -> np.ndarray:
         """The saved times: every ``save_every`` steps of ``dt``, and ``t_final``."""
         n = int(round(self.t_final / self.dt))
+        count = n // self.save_every + 2  # times, indices and unique's copies: 32 bytes each
+        check_alloc(32 * count, f"{self.source}: integrate.save_every = {self.save_every}: "
+                    f"{fmt_count(count)} saved times", "a larger integrate.save_every")
         idx = np.unique(np.r_[np.arange(0, n + 1, self.save_every), n])
         return idx * self.dt
 

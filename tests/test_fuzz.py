@@ -100,7 +100,10 @@ def _noop(*args, **kwargs):
 
 
 def _rhs(make):
-    return lambda **kw: Scene([make(**kw)]).rhs(X, V)
+    def rhs(**kw):
+        sc = Scene([make(**kw)])
+        return sc.rhs(X, V if sc.order == 2 else None)
+    return rhs
 
 
 ENTRIES = {
@@ -215,3 +218,78 @@ def test_bad_arguments_raise_a_named_kinred_error(case, bad):
     kwargs = kw()
     kwargs[arg] = bad
     call_ok(fn, kwargs, arg)
+
+
+# ------------------------------------------------------------------------------------------
+# valid but extreme input: magnitudes, kernels, scales
+# ------------------------------------------------------------------------------------------
+_MAG = st.sampled_from([2.0**-1000, 1e-200, 1e-20, 1.0, 1e20, 1e150, 1e200, 1e300])
+
+
+def _cloud(n, d):
+    return hnp.arrays(np.float64, (n, d), elements=st.one_of(
+        st.floats(-1, 1), st.sampled_from([0.0, 1e-310, -1.0, 1.0])))
+
+
+@settings(max_examples=60, **FUZZ)
+@given(n=st.integers(1, 5), m=st.integers(1, 5), d=st.integers(1, 3), data=st.data(),
+       sx=_MAG, sy=_MAG)
+def test_w1_of_any_finite_clouds_is_finite_or_a_kinred_error(n, m, d, data, sx, sy):
+    x, y = data.draw(_cloud(n, d)) * sx, data.draw(_cloud(m, d)) * sy
+    with small_limit():
+        try:
+            value = w1(x, y).value
+        except Exception as exc:  # noqa: BLE001
+            check_error(exc, "mu")
+        else:
+            assert np.isfinite(value) and value >= 0.0
+
+
+@settings(max_examples=25, **FUZZ)
+@given(ea=st.integers(-1000, 1000), ey=st.integers(-1000, 1000), seed=st.integers(0, 3))
+@example(ea=997, ey=997, seed=0)       # A A^T overflowed: LinAlgError from eigh
+@example(ea=-1000, ey=-1000, seed=1)   # norms underflowed
+def test_basis_pursuit_is_homogeneous_in_powers_of_two(ea, ey, seed):
+    """A·2^ea, Y·2^ey give Z·2^(ey−ea) bit for bit (the solver scales both to O(1))."""
+    rng = np.random.default_rng(seed)
+    A0 = rng.standard_normal((12, 30))
+    Z0 = np.zeros((30, 2))
+    Z0[rng.choice(30, 3, replace=False), [0, 1, 0]] = rng.standard_normal(3)
+    ref = basis_pursuit(A0, A0 @ Z0)
+    try:
+        res = basis_pursuit(np.ldexp(A0, ea), np.ldexp(A0 @ Z0, ey))
+    except InvalidInput as exc:       # a solution beyond the float64 range
+        assert ey - ea > 1000 and names(str(exc), "A") and names(str(exc), "Y")
+        return
+    np.testing.assert_array_equal(np.ldexp(res.Z, ea - ey), ref.Z)
+    assert list(res.status) == list(ref.status) == ["optimal", "optimal"]
+    assert np.max(np.abs(ref.Z - Z0)) < 1e-8
+
+
+_KERNELS = st.one_of(
+    st.builds(CuckerSmale, st.sampled_from([0.0, 1e-300, 1.0, 1e6, 1e300]),
+              st.sampled_from([0.0, 0.5, 1.5, 1e6, 1e300])),
+    st.builds(Morse, st.sampled_from([0.0, 1.0, 1e6, 1e300]), st.sampled_from([1e-300, 1.0, 1e300]),
+              st.sampled_from([0.0, 1.0, 1e300]), st.sampled_from([1e-300, 0.5, 1e300]),
+              st.sampled_from([0.0, 0.25, 1e300])),
+    st.builds(Quadratic, st.sampled_from([0.0, -1.0, 1e300])))
+
+
+@settings(max_examples=40, **FUZZ)
+@given(kernel=_KERNELS, which=st.sampled_from([Alignment, AttractionRepulsion]),
+       n=st.integers(1, 5), d=st.integers(1, 3), data=st.data(), scale=_MAG,
+       method=st.sampled_from(["euler", "rk4", "rk45"]), normalize=st.sampled_from(["mean", "sum"]),
+       dt=st.sampled_from([1e-3, 0.01, 0.1]))
+def test_simulate_with_extreme_kernels_and_states_ends_in_a_result_or_a_kinred_error(
+        kernel, which, n, d, data, scale, method, normalize, dt):
+    x, v = data.draw(_cloud(n, d)) * scale, data.draw(_cloud(n, d)) * scale
+    with small_limit():
+        try:
+            tr = simulate(Scene([which(kernel)], normalize), x, v, (0.0, 0.1), dt, method=method,
+                          max_steps=500, save=SaveAt(every=10, states=True))
+        except Exception as exc:  # noqa: BLE001
+            check_error(exc, "x0")
+        else:  # the states stay finite (observables such as Γ ~ scale² may exceed the range)
+            assert np.all(np.isfinite(tr.x)) and np.all(np.isfinite(tr.v))
+            if scale <= 1e100:
+                assert np.all(np.isfinite(tr.observables["gamma"]))

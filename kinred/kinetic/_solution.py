@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, as_choice, as_float, as_int, as_span
+from .._validate import as_array, as_choice, as_float, as_int, as_span, check_alloc
 from ..errors import InvalidInput
 from ..measures import Atomic, Measure, Mixture, PushForward, TensorProduct
 from ..projection import Projection, as_projection
@@ -419,6 +419,9 @@ def lift(mu: Measure, d: int, seed=None) -> PushForward:
         raise InvalidInput(f"mu must be a phase-space Measure of even dimension, got {mu!r}")
     d0 = mu.dim // 2
     d = as_int(d, "d", low=d0)
+    # the Gaussian draw, QR (Q, R, workspace), the signed copy and B = diag(Q, Q) (2d, 2d0)
+    check_alloc(96 * d * d0, f"lift(mu, d={d}): the isometry ({d}, {d0}) and diag(Q, Q)",
+                "a smaller d")
     rng = as_generator(seed)
     Q, R = np.linalg.qr(rng.standard_normal((d, d0)))
     Q = Q * np.sign(np.diag(R))[None, :]

@@ -51,7 +51,7 @@ import re
 import numpy as np
 from scipy import stats
 
-from .._validate import _short
+from .._validate import _short, check_alloc, fmt_count
 from ..errors import ConfigError, InvalidInput
 from ._base import Dirac, Measure
 from ._composite import Mixture, TensorProduct
@@ -135,15 +135,24 @@ def _coordinates(tables, source, where) -> list[Measure]:
     if not isinstance(tables, list) or not tables:
         raise _err(source, where, "must be a non-empty array of tables ([[coordinate]])")
     out: list[Measure] = []
+    total = 0
     for i, t in enumerate(tables):
         key = f"{where}[{i}]"
         _check_keys(t, _COORD_KEYS, source, key)
         repeat = t.get("repeat", 1)
         if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 1:
             raise _err(source, f"{key}.repeat", f"must be an integer >= 1, got {_short(repeat)}")
+        # the coordinates' objects (a frozen scipy law ~13 kB, a Dirac ~0.6 kB), before building
+        total += (1024 if t.get("dist") == "dirac" else 16384) * repeat
+        check_alloc(total, f"{source}: {key}.repeat = {fmt_count(repeat)}: "
+                           f"{fmt_count(len(out) + repeat)} coordinates",
+                    "fewer coordinates (each is built as an object of 1 to 16 KiB)")
         decay = _number(t.get("decay", 1.0), source, f"{key}.decay")
         if decay <= 0:
             raise _err(source, f"{key}.decay", f"must be > 0, got {decay}")
+        if (repeat - 1) * math.log(decay) > 709.0:  # decay**(repeat - 1) beyond float64
+            raise _err(source, f"{key}.decay", f"decay**(repeat - 1) = {decay}**{repeat - 1} "
+                       "overflows float64: use decay <= 1 or fewer repeats")
         if "dist" not in t:
             raise _err(source, f"{key}.dist", "missing (a scipy.stats distribution name or 'dirac')")
         name = t["dist"]
