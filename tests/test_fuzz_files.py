@@ -111,6 +111,12 @@ def _scene_checks(data, source="<scene>"):
 @settings(max_examples=600, **FUZZ)
 @given(case=mutated(SCENE_DATA, python_keys=True))
 @example(case=({**SMALL_SCENE, "dynamics": {"d": 10**400, "effect": []}}, ["dynamics", "d"]))
+# lift_to = 1e9: MemoryError in kinred.kinetic.lift (now TooLarge naming initial.lift_to)
+@example(case=({**SMALL_SCENE, "dynamics": {**SMALL_SCENE["dynamics"], "d": 10**9},
+                "initial": {**SMALL_SCENE["initial"], "lift_to": 10**9}}, ["lift_to"]))
+# 1e12 saved times: MemoryError in Config.times (now TooLarge naming integrate.save_every)
+@example(case=({**SMALL_SCENE, "integrate": {"dt": 1e-9, "t_final": 1e3, "save_every": 1}},
+               ["save_every"]))
 def test_mutated_scene_tables_load_or_name_the_key(case):
     data, keys = case
     with small_limit(), warnings.catch_warnings():
@@ -129,6 +135,9 @@ def test_mutated_scene_tables_load_or_name_the_key(case):
 # a parameter name that is no identifier reached scipy, whose TypeError printed it raw
 @example(case=({"coordinate": [{"dist": "norm", "params": {"lo\nc": 1.0}, "support": [0, 1]}]},
                ["coordinate", "params", "lo\nc"]))
+# repeat = 10**400 built coordinates forever; decay**199 raised OverflowError
+@example(case=({"coordinate": [{"dist": "uniform", "repeat": 10**400}]}, ["repeat"]))
+@example(case=({"coordinate": [{"dist": "uniform", "repeat": 200, "decay": 1320}]}, ["decay"]))
 def test_mutated_measure_tables_load_or_name_the_key(case):
     data, keys = case
     with small_limit(), warnings.catch_warnings():
