@@ -698,6 +698,10 @@ def run_ensemble(
     DamagedFile
         ``resume=True`` and the store's ``run.json`` is damaged (damaged member files are
         recomputed, with a :class:`~kinred.errors.KinredWarning`).
+    TooLarge
+        The results of all members, projected from those computed so far, would exceed the
+        memory limit (environment variable ``KINRED_MAX_BYTES``, default 2 GiB); finished
+        members are in ``store``.
     KinredError
         ``executor="dask"`` without Dask installed.
     """

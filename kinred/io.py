@@ -423,7 +423,7 @@ def read_toml(path, *, what: str = "TOML file") -> dict:
         Everything that keeps the file from being read and parsed -- missing, a directory, not
         UTF-8 (offset and line of the first bad byte), invalid TOML, an integer of more than
         4300 digits, nesting deeper than Python's recursion limit, a line with more than
-        :data:`TOML_MAX_DOTS_PER_LINE` dots -- as one line naming the file.
+        ``TOML_MAX_DOTS_PER_LINE`` (256) dots -- as one line naming the file.
 
     Examples
     --------

@@ -159,6 +159,10 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         An adaptive method spent ``max_steps``, its step fell below ``1e-12·(t1 − t0)``, or
         the problem is stiff and the budget cannot reach ``t1``; the message names the time
         reached, the step size, the accepted and rejected steps and a hint.
+    TooLarge
+        The saved observables and states (``T`` save points, ``(T, N, d)`` per state) would
+        exceed the memory limit (environment variable ``KINRED_MAX_BYTES``, default 2 GiB);
+        checked before the run allocates anything.
 
     Examples
     --------

@@ -231,6 +231,13 @@ def solve(scene, mu0, *, eps: float | None = None, atoms: int | None = None,
     -------
     KineticSolution
 
+    Raises
+    ------
+    TooLarge
+        The atoms or the saved states ``(T, N, 2d)`` would exceed the memory limit
+        (environment variable ``KINRED_MAX_BYTES``, default 2 GiB); checked before the atoms
+        are built.
+
     Examples
     --------
     >>> from kinred.dynamics import Scene, Alignment, CuckerSmale

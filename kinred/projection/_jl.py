@@ -295,6 +295,12 @@ def jl_matrix(k: int, d: int, kind: str = "gaussian", seed=None) -> Projection:
         :class:`SparseProjection` (achlioptas) or :class:`SRHTProjection` (srht, dct), with
         ``.kind``, ``.seed`` and ``.shape == (k, d)``.
 
+    Raises
+    ------
+    TooLarge
+        The matrix would exceed the memory limit (environment variable ``KINRED_MAX_BYTES``,
+        default 2 GiB); checked before anything is drawn.
+
     Examples
     --------
     >>> M = jl_matrix(3, 8, "rademacher", seed=0)

@@ -791,6 +791,17 @@ def basis_pursuit(
     RecoveryResult
         ``Z (d, n_rhs)`` and per-column status, iterations, residuals, objective.
 
+    Raises
+    ------
+    TooLarge
+        ``AᵀA (d, d)`` and the iterates would exceed the memory limit (environment variable
+        ``KINRED_MAX_BYTES``, default 2 GiB); checked before the solve.
+
+    Notes
+    -----
+    The problem is homogeneous: it is solved for ``A`` and ``Y`` scaled by powers of two to
+    entries below one (exactly), so entries anywhere in the float64 range work.
+
     Examples
     --------
     >>> rng = np.random.default_rng(0)
