@@ -16,7 +16,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -258,24 +258,28 @@ def test_w1_of_any_finite_clouds_is_finite_or_a_kinred_error(n, m, d, data, sx, 
 
 
 @settings(max_examples=25, **FUZZ)
-@given(ea=st.integers(-1000, 1000), ey=st.integers(-1000, 1000), seed=st.integers(0, 3))
-@example(ea=997, ey=997, seed=0)       # A A^T overflowed: LinAlgError from eigh
-@example(ea=-1000, ey=-1000, seed=1)   # norms underflowed
+@given(ea=st.integers(-990, 990), ey=st.integers(-990, 990), seed=st.integers(0, 3))
+@example(ea=990, ey=990, seed=0)       # A A^T overflowed: LinAlgError from eigh
+@example(ea=-990, ey=-990, seed=1)     # norms underflowed (ran for minutes)
 def test_basis_pursuit_is_homogeneous_in_powers_of_two(ea, ey, seed):
-    """A·2^ea, Y·2^ey give Z·2^(ey−ea) bit for bit (the solver scales both to O(1))."""
+    """A·2^ea, Y·2^ey give Z·2^(ey−ea) bit for bit (the solver scales both to O(1)) while
+    the solution is a normal float64."""
+    assume(abs(ey - ea) <= 990)
     rng = np.random.default_rng(seed)
     A0 = rng.standard_normal((12, 30))
     Z0 = np.zeros((30, 2))
     Z0[rng.choice(30, 3, replace=False), [0, 1, 0]] = rng.standard_normal(3)
     ref = basis_pursuit(A0, A0 @ Z0)
-    try:
-        res = basis_pursuit(np.ldexp(A0, ea), np.ldexp(A0 @ Z0, ey))
-    except InvalidInput as exc:       # a solution beyond the float64 range
-        assert ey - ea > 1000 and names(str(exc), "A") and names(str(exc), "Y")
-        return
+    res = basis_pursuit(np.ldexp(A0, ea), np.ldexp(A0 @ Z0, ey))
     np.testing.assert_array_equal(np.ldexp(res.Z, ea - ey), ref.Z)
     assert list(res.status) == list(ref.status) == ["optimal", "optimal"]
     assert np.max(np.abs(ref.Z - Z0)) < 1e-8
+
+
+def test_basis_pursuit_names_a_solution_beyond_the_float_range():
+    with pytest.raises(InvalidInput, match=r"^A \(entries up to 2\^-1000\) and Y \(up to "
+                                           r"2\^1002\) have a solution beyond the float64 range"):
+        basis_pursuit(np.ldexp(np.eye(3), -1001), np.ldexp(np.ones(3), 1001))
 
 
 _KERNELS = st.one_of(
@@ -301,7 +305,7 @@ def test_simulate_with_extreme_kernels_and_states_ends_in_a_result_or_a_kinred_e
                           max_steps=500, save=SaveAt(every=10, states=True))
         except Exception as exc:  # noqa: BLE001
             check_error(exc, "x0")
-        else:  # the states stay finite (observables such as Γ ~ scale² may exceed the range)
+        else:  # the states stay finite; Γ ≤ (2 max|v|)² is finite while max|v| < 1e150
             assert np.all(np.isfinite(tr.x)) and np.all(np.isfinite(tr.v))
-            if scale <= 1e100:
-                assert np.all(np.isfinite(tr.observables["gamma"]))
+            small = np.max(np.abs(tr.v), axis=(1, 2)) < 1e150
+            assert np.all(np.isfinite(tr.observables["gamma"][small]))
