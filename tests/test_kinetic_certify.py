@@ -298,7 +298,8 @@ save_every = 10
 @pytest.fixture
 def main(monkeypatch):
     if "kinred.commands.certify" not in cli.COMMAND_MODULES:
-        monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.certify",))
+        monkeypatch.setattr(cli, "COMMAND_MODULES",
+                            cli.COMMAND_MODULES + ("kinred.commands.certify",))
     return cli.main
 
 

@@ -103,8 +103,8 @@ def run(args) -> int:
     from ..experiments import kinetic_run
 
     cfg = _config(args)
-    out = Path(args.out) if args.out else (Path("results") / "certify" /
-                                           (Path(args.scene).stem + ("-smoke" if args.smoke else "")))
+    name = Path(args.scene).stem + ("-smoke" if args.smoke else "")
+    out = Path(args.out) if args.out else Path("results") / "certify" / name
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume)
     print(f"kinred certify: {cfg.title}: d = {cfg.d}, N = {result.n_atoms} atoms, "
           f"{cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}, k ∈ {list(cfg.ks)}")
@@ -124,7 +124,8 @@ def run(args) -> int:
     print("labels: measured (the runs), certified bound (kinred.certify, for the forward-Euler "
           "runs made), a-priori bound (the paper's constants)")
     print("stages: " + ", ".join(f"{k}: {v}" for k, v in result.stages.items()))
-    print(f"wall time {result.wall_time:.1f} s (certificates: {cost:.1f} s, when their stages were computed)")
+    print(f"wall time {result.wall_time:.1f} s (certificates: {cost:.1f} s, when their stages "
+          "were computed)")
     print(f"report: {out / 'report.html'}")
     sys.stdout.flush()
     return 0 if ok else 1

@@ -45,7 +45,8 @@ SAME_RUN_RTOL = 1e-12
 
 @dataclass(frozen=True)
 class Decision:
-    """Whether the k stages certify (``on``) and, if not, why (``note``)."""
+    """Whether the k stages certify (``on``) and, if not, why (``note``); ``explicit``: the
+    scene's ``[certify] enabled`` was given (not the automatic choice)."""
 
     on: bool
     note: str
@@ -87,7 +88,28 @@ def check_certifiable(cfg) -> None:
 
 
 def decide(cfg, sol) -> Decision:
-    """Whether the k stages of ``cfg`` certify ``sol`` (a :class:`KineticSolution`)."""
+    """Whether the k stages of ``cfg`` certify ``sol``.
+
+    Parameters
+    ----------
+    cfg : Config
+        The scene (its ``[certify]`` table and ``integrate.method``).
+    sol : KineticSolution
+        The solution the k stages reduce (its weighted scene and atom count).
+
+    Returns
+    -------
+    Decision
+        ``enabled = false``: off. Otherwise off, with the reason, when the method is not
+        forward Euler, the pair sum is approximate or an effect is not covered; without
+        ``enabled``, also above :data:`AUTO_MAX_ATOMS` atoms.
+    """
+    from ..kinetic import KineticSolution
+    from ..scenefile import Config
+
+    if not isinstance(cfg, Config) or not isinstance(sol, KineticSolution):
+        raise InvalidInput(f"decide needs a kinred.scenefile.Config and a KineticSolution, got "
+                           f"{type(cfg).__name__} and {type(sol).__name__}")
     explicit = cfg.certify.enabled is not None
     if cfg.certify.enabled is False:
         return Decision(False, "not certified: [certify] enabled = false", True)
@@ -102,7 +124,26 @@ def decide(cfg, sol) -> Decision:
 
 
 def measured_errors(sol, red) -> tuple[np.ndarray, np.ndarray]:
-    """Measured ``(Σᵢ wᵢ(|yᵢ − Mxᵢ|² + |wᵢ − Mvᵢ|²))^{1/2}`` and its max over atoms, per time."""
+    """Measured ``(Σᵢ wᵢ(|yᵢ − Mxᵢ|² + |wᵢ − Mvᵢ|²))^{1/2}`` and ``maxᵢ`` of the same per atom.
+
+    Parameters
+    ----------
+    sol : KineticSolution
+    red : ReducedSolution
+        Its reduced solution (same saved times).
+
+    Returns
+    -------
+    rms, max : (T,) ndarray
+    """
+    from ..kinetic import KineticSolution, ReducedSolution
+
+    if not isinstance(sol, KineticSolution) or not isinstance(red, ReducedSolution):
+        raise InvalidInput(f"measured_errors needs a KineticSolution and a ReducedSolution, got "
+                           f"{type(sol).__name__} and {type(red).__name__}")
+    if red.y.shape[:2] != sol.x.shape[:2]:
+        raise InvalidInput(f"red must reduce sol: (times, atoms) {red.y.shape[:2]} != "
+                           f"{sol.x.shape[:2]}")
     P = red.projection
     w = np.asarray(sol.weights, float)
     T = len(sol.t)
@@ -116,9 +157,29 @@ def measured_errors(sol, red) -> tuple[np.ndarray, np.ndarray]:
 
 def phase_diameter(x, v) -> tuple[np.ndarray, np.ndarray]:
     """``(upper, lower)`` bounds of the diameter of ``{(xᵢ(t), vᵢ(t))}`` in ``ℝ²ᵈ`` per saved
-    time, O(T·N·d) (:func:`kinred.kinetic.diameter_bounds`)."""
+    time, O(T·N·d) (:func:`kinred.kinetic.diameter_bounds`).
+
+    Parameters
+    ----------
+    x, v : (T, N, d) array_like
+
+    Returns
+    -------
+    upper, lower : (T,) ndarray
+
+    Examples
+    --------
+    >>> x = np.array([[[0.0], [3.0]]]); v = np.array([[[0.0], [4.0]]])
+    >>> up, lo = phase_diameter(x, v)
+    >>> float(lo[0]), bool(5.0 <= up[0] < 5.0 + 1e-12)
+    (5.0, True)
+    """
     from ..kinetic import diameter_bounds
 
+    x, v = np.asarray(x, float), np.asarray(v, float)
+    if x.ndim != 3 or x.shape != v.shape:
+        raise InvalidInput(f"x and v must be (T, N, d) arrays of one shape, got {x.shape} and "
+                           f"{v.shape}")
     up, lo = np.empty(len(x)), np.empty(len(x))
     for i in range(len(x)):
         lo[i], up[i] = diameter_bounds(np.concatenate([x[i], v[i]], axis=1))
@@ -127,9 +188,18 @@ def phase_diameter(x, v) -> tuple[np.ndarray, np.ndarray]:
 
 def worst_ratio(bound, measured, t, t_min: float = 1.0) -> float:
     """``max bound/measured`` over saved times ``t − t[0] ≥ t_min`` with ``measured > 0``
-    (NaN if none)."""
+    and a finite bound (NaN if none).
+
+    Examples
+    --------
+    >>> worst_ratio([1.0, 2.0, 3.0, 4.0], [1.0, 1.0, 2.0, 0.0], [0.0, 0.5, 1.0, 2.0])
+    1.5
+    """
     t = np.asarray(t, float)
     b, m = np.asarray(bound, float), np.asarray(measured, float)
+    if not (t.ndim == 1 and b.shape == m.shape == t.shape and t.size):
+        raise InvalidInput(f"bound, measured and t must be 1-D arrays of one non-zero length, "
+                           f"got shapes {b.shape}, {m.shape}, {t.shape}")
     sel = (t - t[0] >= t_min - 1e-12) & (m > 0) & np.isfinite(b)
     return float(np.max(b[sel] / m[sel])) if np.any(sel) else float("nan")
 
@@ -161,10 +231,28 @@ def certify_stage(cfg, sol, red, M, decision: Decision, *, w1, term_quant, bound
                   diameter) -> dict:
     """The arrays :data:`CERT_KEYS` of one k stage (see the module docstring).
 
-    ``w1``, ``term_quant``, ``bound`` are the stage's exact W1 and a-priori terms,
-    ``diameter`` the upper bound of the diameter of ``supp μᴺ(t)`` (``vacuous``:
-    ``bound > diameter``).
+    Parameters
+    ----------
+    cfg : Config
+    sol : KineticSolution
+    red : ReducedSolution
+        The pipeline's reduced solution of ``sol`` by ``M``.
+    M : (k, d) ndarray or Projection
+    decision : Decision
+        :func:`decide`'s.
+    w1, term_quant, bound, diameter : (T,) array_like
+        The stage's exact W1, Theorem 4.3's a-priori terms ``2C(t)‖M‖ε`` and bound, and the
+        upper bound of the diameter of ``supp μᴺ(t)`` (``vacuous``: ``bound > diameter``).
+
+    Returns
+    -------
+    dict
+        ``{name: array}`` for :data:`CERT_KEYS`; NaN certified arrays and the reason in
+        ``cert_note`` where not certified (a refused scene, a diverged certificate, runs
+        that are not the pipeline's), never an exception for those.
     """
+    if not isinstance(decision, Decision):
+        raise InvalidInput(f"decision must be a Decision (from decide), got {decision!r}")
     T = len(sol.t)
     nan = np.full(T, np.nan)
     out = dict(cert_rms=nan, cert_max=nan.copy(), cert_w1=nan.copy(),

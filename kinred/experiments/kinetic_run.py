@@ -53,7 +53,7 @@ from ..errors import InvalidInput, KinredWarning
 from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
 from . import kinetic_certify as _cert
 
-__all__ = ["LABELS", "RunResult", "run", "write_outputs"]
+__all__ = ["LABELS", "NOT_NUMBERS", "RunResult", "run", "write_outputs"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -495,8 +495,8 @@ def write_outputs(result: RunResult, folder) -> Path:
     drawn in a guarded call, and one that fails is replaced by a note in the report. Returns
     the path of ``summary.json``.
     """
-    arrays = {"t": result.t, "gamma_high": result.high["gamma"], "milling_high": result.high["milling"],
-              "diameter_high": result.high["diameter"],
+    arrays = {"t": result.t, "gamma_high": result.high["gamma"],
+              "milling_high": result.high["milling"], "diameter_high": result.high["diameter"],
               "diameter_lower_high": result.high["diameter_lower"]}
     skip = {"y_final", "w_final"}
     for k, r in result.per_k.items():
