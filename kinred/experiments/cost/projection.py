@@ -237,7 +237,7 @@ class ProjectionStudy(Study):
                 speedup=fm["speedup"], error_max=fm["error_max"],
                 gamma_rel_diff=fm["gamma_rel_diff"],
                 text=(f"precision='mixed' (float32 pair sums) runs the full d = "
-                      f"{p['setting']['d']} simulation {fm['speedup']:.2g}x faster at "
+                      f"{p['setting']['d']} simulation {_time_ratio(fm['speedup'])} at "
                       f"{fm['error_max']:.1e} relative trajectory error (max over time); "
                       + (f"{fm['gamma_rel_diff']:.1e} relative change of Gamma(T)"
                          if above_floor(p["full"]["gamma_T"], p["full"]["gamma_floor"]) else
