@@ -73,21 +73,21 @@ def header_lines(cfg) -> list[str]:
     name = cfg.title or Path(cfg.source).stem
     lines = [f"kinred run: {name} ({cfg.source}{', smoke sizes' if cfg.smoke else ''})"]
     if cfg.description:
-        lines += _wrap(f"  scene    {cfg.description}")
+        lines.append(f"  scene    {cfg.description}")
     lines += [
         f"  d        {cfg.d} (the measure lives on phase space R^{2 * cfg.d}: positions and "
         "velocities)",
-        *_wrap(f"  N        {n} atoms{why}"),
+        f"  N        {n} atoms{why}",
         f"  ε        {eps:.4g} (a-priori quantization bound: W1(μ₀, μ₀ᴺ) ≤ ε, eq. (4.14))",
         f"  T        {cfg.t_final:g}, {cfg.method} dt = {cfg.dt:g}"
-        + (f", saved every {cfg.save_every} steps" if cfg.save_every else ""),
+        + (f", saved every {cfg.save_every} steps" if (cfg.save_every or 1) > 1 else ""),
         f"  k        {', '.join(str(k) for k in cfg.ks)} ({cfg.kind} projections)",
         f"  backend  {_backend_text(cfg)}",
     ]
     if cfg.reference_atoms:
-        lines.append(f"  ref      N′ ≤ {cfg.reference_atoms} atoms (finer quantization: estimates "
+        lines.append(f"  ref      N′ ≤ {cfg.reference_atoms} atoms (a finer quantization: estimates "
                      "how far μᴺ(t) is from the kinetic solution)")
-    return lines
+    return [lines[0]] + [part for line in lines[1:] for part in _wrap(line)]
 
 
 def _wrap(text: str) -> list[str]:
