@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", nargs="+", choices=STUDIES, metavar="STUDY",
                         help=f"run only these studies (of {', '.join(STUDIES)})")
     parser.add_argument("--seed", type=int, default=None, help="master seed (default 7)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar (shown on stderr when it is a terminal)")
 
 
 def run(args) -> int:
@@ -67,7 +67,7 @@ def run(args) -> int:
     layout = _output.LAYOUTS["cost"]
     out = Path(args.out) if args.out else _output.default_out("cost", size=size)
     _output.prepare(out, layout, resume=args.resume)
-    result = run_cost(cfg, out_dir=out, resume=args.resume, progress=not args.no_progress)
+    result = run_cost(cfg, out_dir=out, resume=args.resume, progress=not args.no_progress and sys.stderr.isatty())
     _output.record(out, layout)
     loaded = [n for n, v in result.stages.items() if v == "loaded"]
     print(f"kinred cost: {result.wall_time:.1f} s on {result.machine['cpu']} "

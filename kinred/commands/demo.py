@@ -27,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="result folder (default results/demo, results/demo-smoke with "
                              "--smoke; a previous demo there is replaced unless --resume)")
     parser.add_argument("--resume", action="store_true", help="continue an interrupted demo in --out")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="hide the progress bar (shown on stderr when it is a terminal)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes (seconds)")
     parser.add_argument("--dim", type=int, help="dimension d (default 100)")
     parser.add_argument("--atoms", type=int, help="atom budget N (default 400; reference 3N)")
@@ -42,7 +44,8 @@ def run(args) -> int:
     out = Path(args.out) if args.out else _output.default_out(
         "demo", size="smoke" if args.smoke else None)
     _output.prepare(out, layout, resume=args.resume)
-    res = demo.run(cfg, out_dir=out, resume=args.resume)
+    res = demo.run(cfg, out_dir=out, resume=args.resume,
+                   progress=False if args.no_progress else None)
     _output.record(out, layout)
     c = res.config
     print(f"kinred demo: d = {c.d}, N = {res.n_atoms} atoms (W1(μ₀, μ₀ᴺ) ≤ ε = {res.eps:.4g}), "

@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="continue an interrupted run in --out (finished stages are loaded)")
     parser.add_argument("--smoke", action="store_true",
                         help="tiny sizes from the scene's [smoke] table (seconds)")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="hide the progress bar (shown on stderr when it is a terminal)")
 
 
 def run(args) -> int:
@@ -48,7 +50,8 @@ def run(args) -> int:
     header = header_lines(cfg)
     _output.prepare(out, layout, resume=args.resume)
     print("\n".join(header), flush=True)
-    result = kinetic_run.run(cfg, out_dir=out, resume=args.resume)
+    result = kinetic_run.run(cfg, out_dir=out, resume=args.resume,
+                             progress=False if args.no_progress else None)
     _output.record(out, layout)
     print(result.table().to_text())
     done = ", ".join(f"{k}: {v}" for k, v in result.stages.items())
