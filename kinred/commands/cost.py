@@ -67,7 +67,8 @@ def run(args) -> int:
     layout = _output.LAYOUTS["cost"]
     out = Path(args.out) if args.out else _output.default_out("cost", size=size)
     _output.prepare(out, layout, resume=args.resume)
-    result = run_cost(cfg, out_dir=out, resume=args.resume, progress=not args.no_progress and sys.stderr.isatty())
+    progress = not args.no_progress and sys.stderr.isatty()
+    result = run_cost(cfg, out_dir=out, resume=args.resume, progress=progress)
     _output.record(out, layout)
     loaded = [n for n, v in result.stages.items() if v == "loaded"]
     print(f"kinred cost: {result.wall_time:.1f} s on {result.machine['cpu']} "

@@ -1,8 +1,8 @@
 """The three recovery strategies of §3.3.1 at equal work (``kinred paper strategies``).
 
-On the sparse initial data of the paper's Figure 4 (right panel, :mod:`.fig4`): 80 % zero
-entries, Cucker–Smale with the Figure 4 coupling, velocities recovered by ℓ1 minimization
-(problem (3.16)) from
+On the sparse initial data of the paper's Figure 4 (right panel,
+:mod:`kinred.experiments.fig4`): 80 % zero entries, Cucker–Smale with the Figure 4 coupling,
+velocities recovered by ℓ1 minimization (problem (3.16)) from
 
 1. one projection into ℝᵏ (simulate k·N² per step, recover from k rows);
 2. one projection into ℝᴸᵏ (simulate L·k·N², recover from L·k rows);
