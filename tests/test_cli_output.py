@@ -71,6 +71,9 @@ def test_new_and_empty_folders(tmp_path):
     stream = io.StringIO()
     prepare(empty, LAYOUTS["cost"], resume=False, stream=stream)
     assert stream.getvalue() == ""
+    # a folder left with only the marker (the command failed before computing): no notice
+    prepare(out, LAYOUTS["cost"], resume=False, stream=stream)
+    assert stream.getvalue() == "" and [p.name for p in out.iterdir()] == [MARKER]
     with pytest.raises(InvalidInput, match="is a file"):
         prepare(tmp_path / "a" / "b" / MARKER, LAYOUTS["cost"], resume=False)
 

@@ -190,6 +190,7 @@ def prepare(out, layout: Layout, *, resume: bool, stream=None) -> Path:
         _check(out, layout, files)
         if not resume:
             _clear(out, files)
+        if not resume and files != [MARKER]:       # (only a marker: nothing was computed)
             print(f"kinred {layout.command}: replacing the previous run in {out}; use --resume "
                   "to continue it", file=stream or sys.stdout, flush=True)
     try:
