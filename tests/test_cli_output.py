@@ -44,7 +44,7 @@ def test_one_default_folder_rule_and_options(argv):
 
 
 def test_every_long_command_has_a_layout():
-    assert set(LAYOUTS) == {"demo", "run", "paper table1", "paper calibrate", "paper fig4",
+    assert set(LAYOUTS) == {"demo", "run", "certify", "paper table1", "paper calibrate", "paper fig4",
                             "paper strategies", "cost"}
     for argv in LONG:     # every long command can hide its progress bar
         assert build_parser().parse_args(list(argv)).no_progress is False

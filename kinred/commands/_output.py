@@ -71,6 +71,7 @@ _ENSEMBLE = ("store/*", "summary.json", "report.html", "*.png")
 LAYOUTS = {
     "demo": Layout("demo", _KINETIC, ("summary.json", "stages/config.json")),
     "run": Layout("run", _KINETIC, ("summary.json", "stages/config.json")),
+    "certify": Layout("certify", _KINETIC, ("summary.json", "stages/config.json")),
     "paper table1": Layout("paper table1", _ENSEMBLE + ("gamma.npz", "table1.txt", "table1.json"),
                            ("summary.json", "store/run.json")),
     "paper calibrate": Layout("paper calibrate",
