@@ -20,6 +20,7 @@ __all__ = [
     "NotProjectable",
     "DamagedFile",
     "StoreMismatch",
+    "MissingDependency",
     "KinredWarning",
 ]
 
@@ -117,6 +118,11 @@ class TooLarge(KinredError, MemoryError):
 
 class NotProjectable(KinredError, TypeError):
     """An effect does not belong to the paper's class (1.1) and cannot be projected exactly."""
+
+
+class MissingDependency(KinredError, ImportError):
+    """An optional package a call needs is not installed; the message names the package and
+    the ``pip install`` line (e.g. ``pip install 'kinred[xarray]'``)."""
 
 
 class KinredWarning(UserWarning):
