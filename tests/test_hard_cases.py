@@ -338,7 +338,23 @@ def test_cli_paper_table1_existing_folder_is_replaced_and_says_resume_flag(tmp_p
     assert rc == 130 and seen == {"store": False, "resume": False}
     assert stdout == (f"kinred paper table1: replacing the previous run in {out}; use --resume "
                       "to continue it\n")
-    assert "use --resume where offered" in err
+    assert "rerun with --resume to continue" in err
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """``kinred ... | head``: the reader leaves early; no traceback, exit status 141 (SIGPIPE)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, kinred.cli as c\n"
+            "def boom(args):\n    raise BrokenPipeError(32, 'Broken pipe')\n"
+            "p = c.build_parser()\n"
+            "a = p.parse_args(['quantize', 'x.toml', '--atoms', '3'])\n"
+            "a._run = boom\n"
+            "sys.exit(c._run(a))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path)
+    assert p.returncode == 141 and p.stderr == "", p.stderr
 
 
 # ---------------------------------------------------------------------------------------

@@ -325,9 +325,10 @@ def test_kinred_certify_prints_verdicts_and_resumes(tmp_path, main, capsys):
     verdicts = [ln for ln in first.splitlines() if re.match(r"k=\d+: ", ln)]
     assert len(verdicts) == 2
     assert verdicts == [ln for ln in again.splitlines() if re.match(r"k=\d+: ", ln)]
-    # without --resume the folder is refused; a scene it cannot certify: status 2, no work
-    assert main(["certify", str(scene), "--out", str(out)]) == 2
-    assert "already holds a run" in capsys.readouterr().err
+    # without --resume the previous run is replaced (said in one line); a scene it cannot
+    # certify: status 2, no work
+    assert main(["certify", str(scene), "--out", str(out)]) == 0
+    assert "replacing the previous run" in capsys.readouterr().out
     bad = tmp_path / "rk4.toml"
     bad.write_text(textwrap.dedent(SCENE).replace("dt = 0.05", 'method = "rk4"\ndt = 0.05'))
     assert main(["certify", str(bad), "--out", str(tmp_path / "o2")]) == 2

@@ -5,7 +5,7 @@ Runs the scene's kinetic pipeline (as ``kinred run``, same result folder layout 
 every reduced run is certified (:mod:`kinred.experiments.kinetic_certify`). Prints per k the
 measured error of the projected run, its certified bound, their worst ratio over ``t ≥ 1``,
 the paper's a-priori bound, and a one-line verdict. Default folder
-``results/certify/<scene name>``. Exit status 0 when every k is certified and valid, 1 when
+``results/certify-<scene name>``. Exit status 0 when every k is certified and valid, 1 when
 one is not certified or (a bug) a measured value exceeds its certified bound; scenes the
 certificate does not cover (not forward Euler, noise, an approximate pair sum, ...) are
 refused before any work (status 2).
@@ -19,6 +19,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from . import _output
 
 NAME = "certify"
 HELP = ("certify a scene's projected runs: measured error, certified bound, ratio and the "
@@ -41,7 +43,7 @@ _NORMS = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scene-file.md)")
     parser.add_argument("--out", metavar="DIR",
-                        help="result folder (default results/certify/<scene name>)")
+                        help="result folder (default results/certify-<scene name>)")
     parser.add_argument("--resume", action="store_true",
                         help="continue an interrupted run in --out (finished stages are loaded)")
     parser.add_argument("--smoke", action="store_true",
@@ -103,9 +105,12 @@ def run(args) -> int:
     from ..experiments import kinetic_run
 
     cfg = _config(args)
-    name = Path(args.scene).stem + ("-smoke" if args.smoke else "")
-    out = Path(args.out) if args.out else Path("results") / "certify" / name
+    layout = _output.LAYOUTS["certify"]
+    out = Path(args.out) if args.out else _output.default_out(
+        "certify", scene=Path(args.scene).stem, size="smoke" if args.smoke else None)
+    _output.prepare(out, layout, resume=args.resume)
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume)
+    _output.record(out, layout)
     print(f"kinred certify: {cfg.title}: d = {cfg.d}, N = {result.n_atoms} atoms, "
           f"{cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}, k ∈ {list(cfg.ks)}")
     norm = args.norm or cfg.certify.norm          # what is printed (both are computed)

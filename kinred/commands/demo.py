@@ -47,15 +47,8 @@ def run(args) -> int:
     res = demo.run(cfg, out_dir=out, resume=args.resume,
                    progress=False if args.no_progress else None)
     _output.record(out, layout)
-    c = res.config
-    print(f"kinred demo: d = {c.d}, N = {res.n_atoms} atoms (W1(μ₀, μ₀ᴺ) ≤ ε = {res.eps:.4g}), "
-          f"T = {c.t_final:g}, {c.method} dt = {c.dt:g}")
-    print(res.table().to_text())
-    if "w1_quantization" in res.high:
-        print(f"reference: N' = {res.high['n_atoms_reference']} atoms; W1(μᴺ(T), μᴺ'(T)) = "
-              f"{float(res.high['w1_quantization'][-1]):.4g} (exact on R^{2 * c.d})")
-    print("W1 exact (POT); bound = 2C(t)‖M‖ε + √2·D(t)·ε_JL (proof of Theorem 4.3, constants "
-          "measured, not tuned)")
-    print(f"wall time {res.wall_time:.1f} s")
+    print("\n".join(demo.story(res)))
+    print(f"\nwall time {res.wall_time:.1f} s; stages: "
+          + ", ".join(f"{k}: {v}" for k, v in res.stages.items()))
     print(f"report: {res.out_dir / 'report.html'}")
     return 0
