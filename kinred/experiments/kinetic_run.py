@@ -66,7 +66,8 @@ class RunResult:
         ``term_quant``, ``bound``, ``C``, ``D_eps``, ``eps_jl``, ``alpha``, ``beta``, ``Lp``,
         ``Lpp``, ``Lambda``, ``gamma``, ``milling``, optional ``w1_reference``, ``norm_M``.
     high : dict
-        ``gamma``, ``milling`` of ``μᴺ(t)``; ``w1_quantization`` with a reference.
+        ``gamma``, ``milling`` of ``μᴺ(t)``; its atoms at T, ``x_final``, ``v_final``,
+        ``weights``; ``w1_quantization`` with a reference.
     stages : dict
         ``{stage: "computed" | "loaded"}``.
     wall_time : float
@@ -243,7 +244,8 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
             load=_loader(_K_KEYS + (_REF_KEYS if ref is not None else ())))
         bar.update(1)
     bar.close()
-    high = {"gamma": a["gamma"], "milling": a["milling"]}
+    high = {"gamma": a["gamma"], "milling": a["milling"], "x_final": a["x"][-1],
+            "v_final": a["v"][-1], "weights": a["weights"]}   # the last three for the report
     if ref is not None:
         high["w1_quantization"] = per_k[cfg.ks[0]]["w1_quantization"]
         high["n_atoms_reference"] = int(r["n_atoms"])
