@@ -89,8 +89,9 @@ def method_text(result) -> list:
     cfg, high = result.config, result.high
     cert = any("cert_w1" in r for r in result.per_k.values())
     text = ["Measured: W₁(M#μᴺ(t), νᴺ(t)) is exact (POT network simplex on the two atomic "
-            "measures on phase space ℝ²ᵏ, k position and k velocity coordinates); Γ and the "
-            "milling index are evaluated on the atoms."]
+            "measures on phase space ℝ²ᵏ, k position and k velocity coordinates); Γ"
+            + (" and the milling index are" if shows_milling(cfg) else " is")
+            + " evaluated on the atoms."]
     if cert:
         text.append("Certified bound: cert_w1 bounds the measured W₁ from the certificate of "
                     "the particle errors y − Mx, w − Mv, propagated step by step with measured "

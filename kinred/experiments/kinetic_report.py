@@ -48,6 +48,7 @@ def _w1_panel(ax, result, colors, leg):
     t = result.t
     sel = _after_start(t)
     n_ref = result.high.get("n_atoms_reference")
+    ref = f" ($N'$ = {n_ref})" if n_ref else ""
     for k, r in result.per_k.items():
         c = colors[k]
         line = log_plot(ax, t[sel], r["w1"][sel], "-o", color=c, ms=3, lw=1.8)
@@ -60,7 +61,7 @@ def _w1_panel(ax, result, colors, leg):
         if "w1_reference" in r:
             line = log_plot(ax, t[sel], r["w1_reference"][sel], ":", color=c, lw=1.8)
             leg.system(f"k = {k}", c, line)
-            leg.style(":", f"estimate of $W_1(\\mu_M, \\nu)$ ($N'$ = {n_ref})", line)
+            leg.style(":", f"estimate of $W_1(\\mu_M, \\nu)${ref}", line)
     fit_log_axis(ax)
     ax.set_xlabel(_T)
     ax.set_ylabel(r"$W_1$ on $\mathbb{R}^{2k}$ (scene units)")
