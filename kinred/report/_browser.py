@@ -64,9 +64,11 @@ def _page(path) -> Path:
 def _run(args: list, timeout: float) -> subprocess.CompletedProcess:
     exe = find_chromium()
     with tempfile.TemporaryDirectory(prefix="kinred-chromium-") as profile:
-        cmd = [exe, "--headless", "--disable-gpu", "--no-sandbox", "--hide-scrollbars",
-               "--no-first-run", "--disable-extensions", "--mute-audio",
-               f"--user-data-dir={profile}", *args]
+        # --test-type: no "unsupported flag" info bar over the page; compositor stages run
+        # before the screenshot is taken (else a loaded machine can leave tiles unpainted)
+        cmd = [exe, "--headless", "--disable-gpu", "--no-sandbox", "--test-type",
+               "--hide-scrollbars", "--no-first-run", "--disable-extensions", "--mute-audio",
+               "--run-all-compositor-stages-before-draw", f"--user-data-dir={profile}", *args]
         try:
             p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:

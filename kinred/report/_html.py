@@ -40,9 +40,11 @@ class Table:
             "<tr>" + "".join(f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>"
             for row in self.rows
         )
-        cap = f"<caption>{html.escape(self.caption)}</caption>" if self.caption else ""
-        # the wrapper scrolls sideways when the table is wider than the page (never the page)
-        return (f'<div class="table-wrap"><table>{cap}<thead><tr>{head}</tr></thead>'
+        # the caption wraps at the page's width; the wrapper scrolls sideways when the table is
+        # wider than the page (the page itself never does)
+        cap = (f'<p class="table-caption">{html.escape(self.caption)}</p>'
+               if self.caption else "")
+        return (f'{cap}<div class="table-wrap"><table><thead><tr>{head}</tr></thead>'
                 f"<tbody>{body}</tbody></table></div>")
 
     def to_text(self) -> str:
@@ -145,7 +147,7 @@ _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 
         ".table-wrap{overflow-x:auto;max-width:100%;margin:1em 0}"
         "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;"
         "text-align:right}td{white-space:nowrap}th{vertical-align:bottom}"
-        "caption{font-style:italic;text-align:left;padding-bottom:0.3em}"
+        ".table-caption{font-style:italic;margin:1em 0 0.3em}.table-caption+.table-wrap{margin-top:0}"
         "figure{margin:1.5em 0}img{max-width:100%;height:auto;display:block}"
         "figcaption{margin-top:0.4em;color:#333}"
         "details{margin:0.8em 0;border-top:1px solid #ddd;padding-top:0.4em}"

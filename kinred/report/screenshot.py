@@ -7,7 +7,7 @@ Usage::
 
 Without ``--height`` the whole page is captured (its height measured first); ``--width``
 sets the window width in CSS pixels (default 1280). Needs Chromium (Debian/Ubuntu:
-``apt-get install -y chromium``; see :mod:`kinred.report._browser`). Errors are one line on
+``apt-get install -y chromium``, or set ``CHROMIUM`` to its path). Errors are one line on
 stderr (``kinred: error: ...``, exit status 2), as for the ``kinred`` command.
 """
 
@@ -36,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Run the command; returns the exit status (0, or 2 on a :class:`KinredError`)."""
+    """Run the command; returns the exit status (0, or 2 on a
+    :class:`~kinred.errors.KinredError`)."""
     args = build_parser().parse_args(argv)
     try:
         w, h = screenshot(args.page, args.out, width=args.width, height=args.height)
