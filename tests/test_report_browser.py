@@ -1,7 +1,6 @@
 """``report.html`` in a real browser: headless Chromium (Debian package ``chromium``).
 
-A smoke-size demo and the d = 2 mill scene are run, their reports loaded, and the layout
-measured (kinred.report._browser.inspect_page): every figure loads and is visible inside the
+A smoke-size demo is run, its report loaded at two window widths, and the layout measured (kinred.report._browser.inspect_page): every figure loads and is visible inside the
 page, no text overflows its box, the page never scrolls sideways, figures come before tables.
 The checker itself is shown to catch a broken page. Without Chromium the tests FAIL, saying
 how to install it (.ci/run installs it).
@@ -9,15 +8,10 @@ how to install it (.ci/run installs it).
 
 import subprocess
 import sys
-from pathlib import Path
-
 import pytest
 
 from kinred.report import validate_report_html
 from kinred.report._browser import BrowserMissing, find_chromium, inspect_page, png_size
-
-ROOT = Path(__file__).resolve().parents[1]
-
 
 @pytest.fixture(scope="module")
 def chromium():
@@ -28,20 +22,17 @@ def chromium():
 
 
 @pytest.fixture(scope="module")
-def reports(tmp_path_factory, chromium):
-    from kinred.experiments import demo, kinetic_run
+def report(tmp_path_factory, chromium):
+    from kinred.experiments import demo
 
-    out = tmp_path_factory.mktemp("reports")
-    demo.run(demo.DemoConfig(smoke=True), out_dir=out / "demo", progress=False)
-    cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "dorsogna-mill-2d.toml",
-                                  smoke=True)
-    kinetic_run.run(cfg, out_dir=out / "mill", progress=False)
-    return {"demo": out / "demo" / "report.html", "mill": out / "mill" / "report.html"}
+    out = tmp_path_factory.mktemp("demo")
+    demo.run(demo.DemoConfig(smoke=True), out_dir=out, progress=False)
+    return out / "report.html"
 
 
-@pytest.mark.parametrize("which,width", [("demo", 1280), ("mill", 720)])
-def test_report_figures_load_and_text_fits(reports, which, width):
-    page = reports[which]
+@pytest.mark.parametrize("width", [1280, 720])
+def test_report_figures_load_and_text_fits(report, width):
+    page = report
     n_figures = validate_report_html(page.read_text(encoding="utf-8"))
     r = inspect_page(page, width=width, height=900)
     assert n_figures == 4 and len(r["images"]) == n_figures and r["figureNotes"] == 0
@@ -73,9 +64,9 @@ def test_checker_catches_a_broken_page(tmp_path, chromium):
     assert broken["naturalWidth"] == 0 and not hidden["visible"]
 
 
-def test_screenshot_command(reports, tmp_path):
+def test_screenshot_command(report, tmp_path):
     shot = tmp_path / "top.png"
-    p = subprocess.run([sys.executable, "-m", "kinred.report.screenshot", str(reports["demo"]),
+    p = subprocess.run([sys.executable, "-m", "kinred.report.screenshot", str(report),
                         "--out", str(shot), "--width", "1000", "--height", "700"],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
