@@ -1,7 +1,8 @@
 """``report.html`` in a real browser: headless Chromium (Debian package ``chromium``).
 
-A smoke-size demo is run, its report loaded at two window widths, and the layout measured (kinred.report._browser.inspect_page): every figure loads and is visible inside the
-page, no text overflows its box, the page never scrolls sideways, figures come before tables.
+A smoke-size demo is run, its report loaded at two window widths, and the layout measured
+(kinred.report._browser.inspect_page): every figure loads and is visible inside the page, no
+text overflows its box, the page never scrolls sideways, figures come before tables.
 The checker itself is shown to catch a broken page. Without Chromium the tests FAIL, saying
 how to install it (.ci/run installs it).
 """

@@ -61,9 +61,9 @@ class Section:
     """A heading, paragraphs of text, figures and tables (rendered in that order).
 
     A ``folded`` section is rendered as an HTML ``<details>`` element: only its heading shows
-    until the reader opens it (for long tables below the figures). ``figures`` holds ``(caption, png bytes, None)`` for a drawn figure and
-    ``(caption, None, note)`` for a figure that could not be drawn (the note is shown in its
-    place).
+    until the reader opens it (for long tables below the figures). ``figures`` holds
+    ``(caption, png bytes, None)`` for a drawn figure and ``(caption, None, note)`` for a
+    figure that could not be drawn (the note is shown in its place).
     """
 
     title: str
@@ -147,7 +147,8 @@ _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 
         ".table-wrap{overflow-x:auto;max-width:100%;margin:1em 0}"
         "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;"
         "text-align:right}td{white-space:nowrap}th{vertical-align:bottom}"
-        ".table-caption{font-style:italic;margin:1em 0 0.3em}.table-caption+.table-wrap{margin-top:0}"
+        ".table-caption{font-style:italic;margin:1em 0 0.3em}"
+        ".table-caption+.table-wrap{margin-top:0}"
         "figure{margin:1.5em 0}img{max-width:100%;height:auto;display:block}"
         "figcaption{margin-top:0.4em;color:#333}"
         "details{margin:0.8em 0;border-top:1px solid #ddd;padding-top:0.4em}"
