@@ -307,8 +307,9 @@ def figures(result):
              + ("its positions x" if cfg.d <= 2 else
                 f"the first two of its d = {cfg.d} position coordinates")
              + f". Then the reduced system for k = {', '.join(map(str, shown))}: the first "
-             "two coordinates of y (a weighted histogram when k = 1), over the projected "
-             "original Mx with the same M (grey). Marker area ∝ atom weight.")
+             "two coordinates of y" + (" (a weighted histogram for k = 1)" if 1 in shown else "")
+             + ", over the projected original Mx with the same M (grey). Marker area ∝ atom "
+             "weight.")
     return [draw_figure("w1_vs_time.png", w1_cap, _fig_w1, result),
             draw_figure("bound.png", b_cap, _fig_bound, result),
             draw_figure("observables.png", o_cap, _fig_observables, result),
