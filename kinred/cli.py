@@ -31,6 +31,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "kinred.commands.demo",
     "kinred.commands.quantize",
     "kinred.commands.run",
+    "kinred.commands.certify",
     "kinred.commands.paper",
     "kinred.commands.cost",
 )
