@@ -20,9 +20,16 @@ ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def small():
-    """SMALL_SCENE: d = 3, Cucker–Smale alignment only, k ∈ {1, 2}, no reference."""
+def small_run():
+    """SMALL_SCENE: d = 3, Cucker–Smale alignment only, k ∈ {1, 2}, no reference; with the
+    pipeline's certificates."""
     return kinetic_run.run(kinetic_run.config_from_dict(kinetic_run.SMALL_SCENE), progress=False)
+
+
+@pytest.fixture(scope="module")
+def small(small_run):
+    """The same run without certificates (the tests add made-up ones where they need them)."""
+    return _plain(small_run)
 
 
 @pytest.fixture(scope="module")
@@ -31,6 +38,19 @@ def mill():
     cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "dorsogna-mill-2d.toml",
                                   smoke=True)
     return kinetic_run.run(cfg, progress=False)
+
+
+#: What a run without certificates lacks (the arrays of kinetic_certify.CERT_KEYS and the
+#: cloud's diameter): the report must work without them.
+_CERT = ("err_rms", "err_max", "cert_rms", "cert_max", "cert_w1", "cert_saturated", "paper_rms",
+         "paper_max", "bound_mixed", "vacuous", "cert_time", "cert_note")
+
+
+def _plain(result):
+    """``result`` without certificate arrays and diameters (as before they existed)."""
+    per_k = {k: {n: v for n, v in r.items() if n not in _CERT} for k, r in result.per_k.items()}
+    high = {n: v for n, v in result.high.items() if n not in ("diameter", "diameter_lower")}
+    return dataclasses.replace(result, per_k=per_k, high=high)
 
 
 def _with(result, high=None, **per_k_fns):
@@ -131,7 +151,7 @@ def test_apriori_bound_figure_marks_vacuous_and_skips_infinite(small):
     ax = fig.axes[0]
     labels = _legend_labels(ax)
     assert f"k = {k_inf}" not in labels and "k = 1" in labels
-    assert "diameter of the cloud (measured)" in labels
+    assert "diameter of the cloud (upper bound)" in labels
     assert "vacuous region: above the diameter" in labels
     assert any(f"k = {k_inf} at {len(res.t)} of {len(res.t)}" in t.get_text() for t in ax.texts)
     assert ax.collections, "the region above the diameter is shaded"
@@ -224,3 +244,20 @@ def test_summary_marks_vacuous_from_diameter_or_flag(small):
                 vacuous=lambda r: np.ones(len(r["w1"]), bool))  # the flag wins
     assert all("(vacuous)" in str(row[-3]) for row in summary_table(res).rows[1:])
     assert vacuous(small, small.per_k[1]) is None
+
+
+def test_pipeline_certificates_are_drawn_above_the_measured_w1(small_run):
+    res = small_run                         # the certificates kinred run computes itself
+    fig = _draw(kr._fig_w1, res)
+    ax = fig.axes[0]
+    assert "certified bound" in _legend_labels(ax) and len(fig.axes) == 3
+    solid = [ln for ln in ax.get_lines() if ln.get_linestyle() == "-"]
+    dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]
+    assert len(solid) == len(dashed) == len(res.per_k)
+    for s, d in zip(solid, dashed):        # the certified bound lies on or above the measured W1
+        assert np.all(np.asarray(d.get_ydata()) >= np.asarray(s.get_ydata()))
+    fig = _draw(kr._fig_bound, res)
+    assert "diameter of the cloud (upper bound)" in _legend_labels(fig.axes[0])
+    html = kr.report(res, kr.figures(res)).to_html()
+    vac = any(bool(np.asarray(r["vacuous"])[-1]) for r in res.per_k.values())
+    assert ("(vacuous)" in html) == vac

@@ -42,6 +42,11 @@ def vacuous(result, r) -> np.ndarray | None:
         return np.asarray(r["bound"], float) > np.asarray(diam, float)
 
 
+def _finite(r, key) -> bool:
+    """Whether ``r[key]`` exists and has a finite value (NaN: the k was not certified)."""
+    return key in r and bool(np.any(np.isfinite(np.asarray(r[key], dtype=float))))
+
+
 def _verdict(g, cfg) -> str:
     from ..observables import flocking_verdict
 
@@ -60,7 +65,7 @@ def summary_table(result):
     from ..report import Table
 
     cfg, per_k = result.config, result.per_k
-    cert = any("cert_w1" in r for r in per_k.values())
+    cert = any(_finite(r, "cert_w1") for r in per_k.values())
     ref = any("w1_reference" in r for r in per_k.values())
     mill = shows_milling(cfg)
     head = ["system", "W₁(T) measured", "max_t W₁ measured"]
@@ -74,7 +79,7 @@ def summary_table(result):
     rows = [row + ([f"{float(result.high['milling'][-1]):.3f}"] if mill else [])]
     for k, r in per_k.items():
         row = [f"reduced, k = {k}", float(r["w1"][-1]), float(np.max(r["w1"]))]
-        row += [float(r["cert_w1"][-1]) if "cert_w1" in r else "—"] if cert else []
+        row += [float(r["cert_w1"][-1]) if _finite(r, "cert_w1") else "—"] if cert else []
         row += [float(r["w1_reference"][-1]) if "w1_reference" in r else "—"] if ref else []
         row += [_bound_cell(result, r), f"{r['gamma'][-1]:.3g}", _verdict(r["gamma"][-1], cfg)]
         row += [f"{float(r['milling'][-1]):.3f}"] if mill else []
@@ -87,7 +92,7 @@ def summary_table(result):
 def method_text(result) -> list:
     """Paragraphs saying how each kind of number is obtained."""
     cfg, high = result.config, result.high
-    cert = any("cert_w1" in r for r in result.per_k.values())
+    cert = any(_finite(r, "cert_w1") for r in result.per_k.values())
     text = ["Measured: W₁(M#μᴺ(t), νᴺ(t)) is exact (POT network simplex on the two atomic "
             "measures on phase space ℝ²ᵏ, k position and k velocity coordinates); Γ"
             + (" and the milling index are" if shows_milling(cfg) else " is")
@@ -103,9 +108,10 @@ def method_text(result) -> list:
                 "(docs/kinetic.md). It is not tuned.")
     diam = high.get("diameter")
     if diam is not None:
-        text.append(f"The cloud's diameter is {float(np.asarray(diam)[-1]):.4g} at T "
-                    "(measured): no two measures on it are farther apart in W₁, so an a-priori "
-                    "bound above it is vacuous.")
+        d_t = float(np.asarray(diam)[-1])
+        text.append(f"The diameter of supp μᴺ(T) in ℝ²ᵈ is at most {d_t:.4g} (certified "
+                    "upper bound, docs/certificates.md); a W₁ bound above it says nothing about "
+                    "a cloud of that size: it is marked vacuous.")
     if "w1_quantization" in high:
         wq = np.asarray(high["w1_quantization"], float)
         text.append(f"Estimate: W₁(μ_M(t), ν(t)) between the kinetic solutions, from a finer "
@@ -124,6 +130,8 @@ _COLUMNS = (  # (key, header, group); group None: always
     ("cert_rms", "RMS error certified bound", "cert"),
     ("err_max", "max error measured", "cert"), ("cert_max", "max error certified bound", "cert"),
     ("paper_rms", "RMS error a-priori bound, eq. (2.18)", "cert"),
+    ("paper_max", "max error a-priori bound, √2 × eq. (2.11)", "cert"),
+    ("bound_mixed", "2C‖M‖ε + certified W₁, a-priori", "cert"),
     ("term_jl", "√2·D·ε_JL a-priori", None), ("term_quant", "2C‖M‖ε a-priori", None),
     ("bound", "a-priori bound, eq. (4.17)", None), ("eps_jl", "ε_JL measured", None),
     ("C", "C(t) a-priori constant", None),

@@ -36,6 +36,12 @@ __all__ = ["figures", "report", "shows_milling"]
 _T = r"time $t$ (scene units)"
 
 
+def _has(r, key) -> bool:
+    """Whether the per-k dict ``r`` has array ``key`` with a finite value (a k that was not
+    certified has NaN certificate arrays)."""
+    return key in r and bool(np.any(np.isfinite(np.asarray(r[key], dtype=float))))
+
+
 def _after_start(t):
     """Saved times after t = 0 (where measured errors are round-off), or all of them."""
     sel = np.asarray(t) > 0
@@ -95,7 +101,7 @@ def _fig_w1(plt, result):
     from ..report._plots import StyleLegend, k_colors
 
     colors = k_colors(result.per_k)
-    with_err = any("err_rms" in r or "err_max" in r for r in result.per_k.values())
+    with_err = any(_has(r, "err_rms") or _has(r, "err_max") for r in result.per_k.values())
     if with_err:
         fig = plt.figure(figsize=(10, 8.6), layout="constrained")
         grid = fig.add_gridspec(2, 2, height_ratios=(1.3, 1.0))
@@ -142,7 +148,7 @@ def _fig_bound(plt, result):
                 leg.style("", "vacuous (a-priori bound > diameter)", mark, "x")
     diam = result.high.get("diameter")
     dline = None if diam is None else log_plot(ax, t, diam, "k-", lw=2.5)
-    leg.system("diameter of the cloud (measured)", "black", dline)
+    leg.system("diameter of the cloud (upper bound)", "black", dline)
     fit_log_axis(ax)
     if dline is not None:
         leg.patch("vacuous region: above the diameter", "#f3c4c4", shade_above(ax, t, diam))
@@ -275,17 +281,21 @@ def figures(result):
 
     cfg, k0 = result.config, result.config.ks[0]
     ref = result.high.get("n_atoms_reference")
-    has_cert = any("cert_w1" in r for r in result.per_k.values())
+    has_cert = any(_has(r, "cert_w1") for r in result.per_k.values())
     w1_cap = ("W₁(M#μᴺ(t), νᴺ(t)) on phase space ℝ²ᵏ, per k: measured exactly (solid)"
               + (", its certified bound (dashed)" if has_cert else "")
               + (f", and the estimate of W₁(μ_M(t), ν(t)) from a reference with N′ = {ref} "
                  "atoms (dotted)" if ref else "")
               + ". The axis spans these curves only; the a-priori bound is the next figure.")
-    if any("err_rms" in r for r in result.per_k.values()):
+    if any(_has(r, "err_rms") for r in result.per_k.values()):
         w1_cap += (" Below: the particle errors (y − Mx, w − Mv), measured (solid) and "
                    "certified (dashed).")
-    notes = [f" k = {k}: {r['cert_note']}" for k, r in result.per_k.items()
-             if str(r.get("cert_note", "")).strip()]
+    notes = {k: str(r.get("cert_note", "")).strip() for k, r in result.per_k.items()}
+    notes = {k: n for k, n in notes.items() if n}
+    if len(set(notes.values())) == 1 and len(notes) == len(result.per_k):
+        notes = [f" Certificate: {next(iter(notes.values()))}."]
+    else:
+        notes = [f" Certificate, k = {k}: {n}." for k, n in notes.items()]
     sat = [str(k) for k, r in result.per_k.items() if np.any(r.get("cert_saturated", False))]
     if sat:
         w1_cap += (f" Certificate saturated for k = {', '.join(sat)}: there the bound only says "
@@ -294,7 +304,8 @@ def figures(result):
     diam = result.high.get("diameter")
     b_cap = ("A-priori bound of Theorem 4.3 (right-hand side of eq. (4.17), constants of its "
              "proof measured on this run) per k, with its quantization term (dotted)"
-             + (", beside the cloud's diameter (black): above it (shaded) the bound is vacuous"
+             + (", beside an upper bound of the diameter of supp μᴺ(t) in ℝ²ᵈ (black): above "
+                "it (shaded) the bound says nothing about a cloud of that size (vacuous)"
                 if diam is not None else "; the cloud's diameter is not in this result")
              + ".")
     o_cap = ("Velocity fluctuation Γ(t), measured, of the original system (black) and of the "
