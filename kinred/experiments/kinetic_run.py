@@ -80,7 +80,8 @@ class RunResult:
     high : dict
         ``gamma``, ``milling`` of ``μᴺ(t)``; ``diameter`` (an upper bound of the diameter of
         ``supp μᴺ(t)`` in ``ℝ²ᵈ``, O(N·d)) and ``diameter_lower`` (a distance between two
-        atoms); ``w1_quantization`` with a reference.
+        atoms); its atoms at T, ``x_final``, ``v_final``, ``weights`` (for the report);
+        ``w1_quantization`` with a reference.
     stages : dict
         ``{stage: "computed" | "loaded"}``.
     wall_time : float
@@ -173,6 +174,7 @@ LABELS = MappingProxyType({
     "w1_reference": _E, "w1_quantization": _E,
     # high: μᴺ(t)
     "diameter": _C, "diameter_lower": _M, "eps_reference": _A,
+    "x_final": _M, "v_final": _M, "weights": _M,     # the atoms of μᴺ(T), for the report
 })
 #: Stage entries that are not numbers: the target dimension, the certificate's note and the
 #: reference's atom count (parameters and text).
@@ -308,7 +310,8 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
         bar.update(1)
     bar.close()
     high = {"gamma": a["gamma"], "milling": a["milling"], "diameter": diameter,
-            "diameter_lower": diameter_lower}
+            "diameter_lower": diameter_lower, "x_final": a["x"][-1], "v_final": a["v"][-1],
+            "weights": a["weights"]}   # the last three for the report's positions figure
     if ref is not None:
         high["w1_quantization"] = per_k[cfg.ks[0]]["w1_quantization"]
         high["n_atoms_reference"] = int(r["n_atoms"])
