@@ -184,6 +184,11 @@ def test_theorem_bound_above_the_exact_diameter_limit_stays_an_upper_bound(monke
     upper = theorem_bound(sol, red)
     assert "O(N d) upper bounds" in upper.note and "O(N d)" not in exact.note
     assert np.all(upper.alpha >= exact.alpha) and np.all(upper.diam_v >= exact.diam_v)
+    # eps_JL: the operator bound max(1 - s_min, s_max - 1) (k < d: s_min = 0), above every pair's
+    assert "operator bound" in upper.note
+    s = np.linalg.svd(np.asarray(jl_matrix(2, 6, seed=1)), compute_uv=False)
+    assert np.allclose(upper.eps_jl, max(1.0, s.max() - 1.0), rtol=1e-9)
+    assert np.all(upper.eps_jl >= exact.eps_jl) and np.all(exact.eps_jl > 0.01)
     assert np.all(upper.bound >= exact.bound) and np.all(upper.bound <= 1e3 * exact.bound)
 
 
