@@ -13,7 +13,7 @@ right-hand side of eq. (2.18) is printed for comparison.
 
 .. code-block:: console
 
-    python examples/certify_projection.py [--smoke] [--out certify_projection.png]
+    python examples/certify_projection.py [--smoke] [--out FIGURE.png]
 """
 
 # %%
@@ -32,7 +32,7 @@ from kinred.projection import jl_matrix
 
 ap = argparse.ArgumentParser(description="Certified error of a projected run")
 ap.add_argument("--smoke", action="store_true", help="tiny sizes (for the test suite)")
-ap.add_argument("--out", default="certify_projection.png", help="where to save the figure")
+ap.add_argument("--out", default=None, help="also save the figure to this file (PNG)")
 args, _ = ap.parse_known_args()
 N, d, k, T = (40, 50, 8, 3.0) if args.smoke else (200, 200, 20, 15.0)
 dt = 0.02
@@ -78,6 +78,7 @@ ax.set_ylabel("RMS error of the projected run")
 ax.set_title(f"Projected Cucker-Smale run, N={N}, d={d}, k={k}")
 ax.legend()
 fig.tight_layout()
-fig.savefig(args.out, dpi=100)
-print(f"figure: {args.out}")
+if args.out:
+    fig.savefig(args.out, dpi=100)
+    print(f"figure: {args.out}")
 print("done")

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import os
 import sys
 import warnings
 
@@ -31,6 +32,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "kinred.commands.demo",
     "kinred.commands.quantize",
     "kinred.commands.run",
+    "kinred.commands.certify",
     "kinred.commands.paper",
     "kinred.commands.cost",
 )
@@ -88,9 +90,15 @@ def _run(args) -> int:
         print(f"kinred: error: {type(exc).__name__}: {text}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("kinred: interrupted; finished results are on disk (use --resume where offered)",
-              file=sys.stderr)
+        print("kinred: interrupted; finished results are on disk (rerun with --resume to "
+              "continue)", file=sys.stderr)
         return 130
+    except BrokenPipeError:                   # e.g. `kinred ... | head`: the reader left
+        try:
+            sys.stdout = open(os.devnull, "w")    # no second error when Python flushes at exit
+        except OSError:
+            pass
+        return 141
     return 0 if code is None else int(code)
 
 

@@ -22,6 +22,7 @@ __all__ = [
     "NotProjectable",
     "DamagedFile",
     "StoreMismatch",
+    "MissingDependency",
     "KinredWarning",
 ]
 
@@ -131,6 +132,11 @@ class TooLarge(KinredError, MemoryError):
 
 class NotProjectable(KinredError, TypeError):
     """An effect does not belong to the paper's class (1.1) and cannot be projected exactly."""
+
+
+class MissingDependency(KinredError, ImportError):
+    """An optional package a call needs is not installed; the message names the package and
+    the ``pip install`` line (e.g. ``pip install 'kinred[xarray]'``)."""
 
 
 class KinredWarning(UserWarning):

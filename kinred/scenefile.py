@@ -515,11 +515,15 @@ TABLES: dict[str, tuple] = {
         Key("no_above", "number", 1e-3, "no flocking if Γ(T) > no_above", low=0.0),
     ),
     "certify": (
-        Key("enabled", "boolean", False, "run the certificate (kinred.certify) per k"),
-        Key("norm", "string", "both", "certified norms: weighted RMS over agents "
-            "(eq. (2.18)), maximum over agents (eq. (2.11)) or both",
+        Key("enabled", "boolean", None, "true: certify every k (kinred.certify); false: never; "
+            "absent: when cheap (Euler, certifiable scene, exact pair sum, N ≤ 2000 atoms)",
+            shown_default="absent (auto)"),
+        Key("norm", "string", "both", "certified norms printed by kinred certify: weighted "
+            "RMS over agents (eq. (2.18)), maximum over agents (eq. (2.11)) or both (both are "
+            "computed and stored)",
             choices=("rms", "max", "both")),
-        Key("paper", "boolean", True, "also evaluate the paper's bounds"),
+        Key("paper", "boolean", True, "also evaluate the paper's bounds (eq. (2.11), (2.18); "
+            "one high-dimensional pair pass per saved time)"),
     ),
 }
 
@@ -548,10 +552,16 @@ TABLES["smoke"] = _smoke_keys()
 @dataclass(frozen=True)
 class CertifyOptions:
     """The ``[certify]`` table: whether ``kinred run`` certifies each projected run
-    (:func:`kinred.certify.certify`) and how. Reserved for issue 16: the pipeline does not
-    compute it yet."""
+    (:func:`kinred.certify.certify`, per k in the k stage) and how.
 
-    enabled: bool = False
+    ``enabled``: ``True`` certifies every k, ``False`` none, ``None`` (the key absent) when it
+    is cheap and possible: forward Euler, a scene the certificate covers, an exact pair sum and
+    at most ``kinred.experiments.kinetic_certify.AUTO_MAX_ATOMS`` atoms. Where a k is not
+    certified its stage says why (``cert_note``). ``norm`` picks the norms the tables print
+    (both are always computed); ``paper`` also evaluates the paper's bounds (eq. (2.11),
+    (2.18))."""
+
+    enabled: bool | None = None
     norm: str = "both"
     paper: bool = True
 
@@ -595,7 +605,8 @@ class Config:
 
     def to_json(self) -> dict:
         """The configuration as JSON. ``pairsum`` and ``certify`` (added after the first
-        format) appear only when set, so the digest of a scene without them is unchanged."""
+        format) appear only when set (``certify``: when it differs from the defaults), so the
+        digest of a scene without them is unchanged."""
         skip = ("data", "pairsum", "certify")
         out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in skip}
         out["effects"] = [[t, p] for t, p in self.effects]
@@ -603,7 +614,7 @@ class Config:
         out["initial"] = self.data.get("initial")
         if self.pairsum is not None:
             out["pairsum"] = [self.pairsum[0], self.pairsum[1]]
-        if self.certify.enabled:
+        if self.certify != CertifyOptions():
             out["certify"] = asdict(self.certify)
         return out
 

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import pickle
 
 import numpy as np
 import pytest
 
-from kinred.errors import InvalidInput
+from kinred.errors import InvalidInput, StoreMismatch
 from kinred.experiments import cost
 from kinred.experiments.cost import (REGISTRY, STUDIES, CostConfig, pareto_front, run,
                                      time_to_reach)
@@ -23,7 +21,7 @@ class _CountingBar:
     """Stands in for the progress bar: counts the updates of each study."""
 
     def __init__(self, total, enabled):
-        self.total, self.counts, self.study = total, {}, None
+        self.total, self.counts, self.study, self.n = total, {}, None, 0
 
     def __enter__(self):
         return self
@@ -36,6 +34,7 @@ class _CountingBar:
 
     def update(self, n):
         self.counts[self.study] = self.counts.get(self.study, 0) + n
+        self.n += n
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +94,16 @@ def test_projection_error_decreases_with_k(smoke):
         for r in rs:
             assert r["error_max"] >= r["error_final"] - 1e-15
             assert 0.0 <= r["verdict_agreement"] <= 1.0 and r["time_s"] > 0
+            # agreement is reported as a count of runs: "2/2", not a percentage of 2 runs
+            runs = [x for x in p["runs"] if x["kind"] == kind and x["k"] == r["k"]]
+            assert r["runs"] == len(runs) == 2
+            assert r["verdict_agrees"] == sum(x["agrees"] for x in runs)
+            assert r["verdict_agreement"] == r["verdict_agrees"] / r["runs"]
+    table = REGISTRY["projection"].table(p).to_text()
+    assert "verdict agrees (runs)" in table and "%" not in table
+    assert f"{p['summary'][0]['verdict_agrees']}/2" in table
+    assert "runs" in result.headline["projection"]["text"]
+    assert "% of runs" not in result.headline["projection"]["text"]
 
 
 def test_precision_knob_is_priced(smoke):
@@ -267,24 +276,56 @@ def test_registry_rejects_repeated_names_and_streams():
 
 
 def test_cli_smoke(tmp_path, capsys):
-    cmd = importlib.import_module("kinred.commands.cost")
     from kinred import cli
 
+    assert "kinred.commands.cost" in cli.COMMAND_MODULES
     argv = ["cost", "--smoke", "--only", "quantization", "w1", "--no-progress",
             "--out", str(tmp_path / "c")]
-    if "kinred.commands.cost" in cli.COMMAND_MODULES:
-        code = cli.main(argv)
-    else:
-        parser = argparse.ArgumentParser()
-        cmd.add_arguments(parser)
-        code = cmd.run(parser.parse_args(argv[1:]))
-    assert code == 0
+    assert cli.main(argv) == 0
     out = capsys.readouterr().out
     assert "delayed-curse budget" in out and "exact-lazy" in out
+    # the last line says where the results went
+    assert out.strip().splitlines()[-1].startswith(f"results: {(tmp_path / 'c').resolve()} ")
     folder = ResultFolder(tmp_path / "c")
     assert folder.is_complete
     assert sorted(n for n in folder.list() if n.endswith(".png")) == ["cost_quantization.png", "cost_w1.png"]
     assert validate_report_html(folder.read_text("report.html")) == 2
+    first = folder.read_json("cost.json")
+    assert first["stages"] == {"quantization": "computed", "w1": "computed"}
+    # --resume after losing one study's stage: the other is loaded, the numbers are the same
+    (tmp_path / "c" / "stages" / "w1.npz").unlink()
+    (tmp_path / "c" / "summary.json").unlink()
+    assert cli.main(argv + ["--resume"]) == 0
+    out = capsys.readouterr().out
+    again = folder.read_json("cost.json")
+    assert again["stages"] == {"quantization": "loaded", "w1": "computed"}
+    assert "studies loaded from the previous run: quantization" in out
+    assert again["quantization"] == first["quantization"]           # bit for bit (JSON)
+    assert again["study_wall_time_s"]["quantization"] == first["study_wall_time_s"]["quantization"]
+    assert [r["N"] for r in again["w1"]["rows"]] == [r["N"] for r in first["w1"]["rows"]]
+    assert np.allclose([r["value"] for r in again["w1"]["rows"] if r["method"] == "exact"],
+                       [r["value"] for r in first["w1"]["rows"] if r["method"] == "exact"],
+                       rtol=1e-12, atol=0)
+    # without --resume the previous run is replaced, and the command says so
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0] == (f"kinred cost: replacing the previous run in {tmp_path / 'c'}; "
+                                   "use --resume to continue it")
+    assert folder.read_json("cost.json")["stages"] == {"quantization": "computed",
+                                                       "w1": "computed"}
+
+
+def test_resumed_run_numbers_equal(tmp_path):
+    """The API: a study loaded from the store gives the numbers it was stored with."""
+    cfg = CostConfig.smoke(studies=("quantization",))
+    first = run(cfg, out_dir=tmp_path, progress=False)
+    again = run(cfg, out_dir=tmp_path, progress=False, resume=True)
+    assert again.stages == {"quantization": "loaded"} and first.stages == {"quantization": "computed"}
+    assert again.studies == first.studies and again.study_times == first.study_times
+    with pytest.raises(StoreMismatch, match="already holds a run"):
+        run(cfg, out_dir=tmp_path, progress=False)
+    with pytest.raises(StoreMismatch, match="different configuration"):
+        run(CostConfig.smoke(studies=("w1",)), out_dir=tmp_path, progress=False, resume=True)
 
 
 @pytest.mark.parametrize("make", [CostConfig, CostConfig.quick, CostConfig.smoke],

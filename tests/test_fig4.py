@@ -1,6 +1,7 @@
 """`kinred paper fig4 --quick`: the qualitative facts of the paper's Figure 4 (§3.4.2)."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -8,7 +9,8 @@ import pytest
 from kinred.cli import main
 from kinred.errors import InvalidInput
 from kinred.experiments import fig4
-from kinred.experiments.fig4 import Fig4Config, _relative, strategies
+from kinred.experiments.fig4 import Fig4Config, _relative
+from kinred.experiments.recovery_strategies import strategies
 from kinred.report import validate_report_html
 
 
@@ -84,6 +86,30 @@ def test_fig4_report(quick):
     assert (out / "summary.json").exists()
 
 
+def test_interrupted_fig4_resumes_with_the_same_numbers(quick, tmp_path, capsys):
+    """A run that lost its summary and one stage (as an interruption leaves it) resumes with
+    --resume: the other stages are loaded (and said so), the numbers are those of the run."""
+    src, before = quick
+    out = tmp_path / "fig4"
+    shutil.copytree(src, out)
+    (out / "summary.json").unlink()
+    (out / "stages" / "recover3.npz").unlink()
+    stamp = (out / "stages" / "left.npz").stat().st_mtime_ns
+    capsys.readouterr()
+    assert main(["paper", "fig4", "--quick", "--out", str(out), "--resume"]) == 0
+    printed = capsys.readouterr().out
+    assert "stages: 13 loaded from the previous run (left, sparse, projection0" in printed
+    assert "1 computed" in printed
+    after = json.loads((out / "fig4.json").read_text())
+    assert after["stages"]["recover3"] == "computed" and after["stages"]["left"] == "loaded"
+    assert set(before["stages"].values()) == {"computed"}
+    for key in ("t", "projection_error", "projection_bound", "recovery_error",
+                "recovery_converged_fraction"):
+        assert after[key] == before[key], key                  # bit for bit (JSON floats)
+    assert (out / "stages" / "left.npz").stat().st_mtime_ns == stamp   # loaded, not rewritten
+    assert (out / "summary.json").exists()
+
+
 def test_relative_error_formula():
     a = np.zeros((2, 3, 4))
     b = np.ones((2, 3, 4))
@@ -109,3 +135,22 @@ def test_three_strategies_table():
     assert e2 < 0.5 * e1 and e3 < 0.6 * e1
     assert all(r["simulate_s"] > 0 and r["recover_s"] > 0 for r in res.rows)
     assert "L projections into R^k" in res.to_text()
+
+
+def test_strategies_resume(tmp_path):
+    """Strategies in stages: a lost stage is recomputed on resume, the others are loaded with
+    their measured times; the errors equal the first run's."""
+    cfg = Fig4Config.quick(N=30, d=40, steps=100)
+    first = strategies(cfg, L=2, k=6, out_dir=tmp_path, progress=False)
+    assert first.stages == {"truth": "computed", "strategy0": "computed",
+                            "strategy1": "computed", "strategy2": "computed"}
+    (tmp_path / "stages" / "strategy1.npz").unlink()
+    again = strategies(cfg, L=2, k=6, out_dir=tmp_path, progress=False, resume=True)
+    assert again.stages == {"truth": "loaded", "strategy0": "loaded", "strategy1": "computed",
+                            "strategy2": "loaded"}
+    for a, b in zip(first.rows, again.rows):
+        assert (a["max_error"], a["final_error"]) == (b["max_error"], b["final_error"])
+    assert again.rows[0]["simulate_s"] == first.rows[0]["simulate_s"]      # loaded
+    assert json.loads((tmp_path / "strategies.json").read_text())["stages"] == again.stages
+    # the old import path still works
+    assert fig4.strategies is strategies

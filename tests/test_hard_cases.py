@@ -316,15 +316,47 @@ def test_cli_resume_refuses_damaged_stage_index(content, tmp_path, capsys):
                     f"delete the folder {out}", "another output folder")
 
 
-def test_cli_paper_table1_existing_folder_says_resume_flag(tmp_path, capsys):
-    # a re-run without --resume into a folder holding a run told CLI users "pass resume=True"
+def test_cli_paper_table1_existing_folder_is_replaced_and_says_resume_flag(tmp_path, capsys,
+                                                                          monkeypatch):
+    # a re-run without --resume into a folder holding a run told CLI users "pass resume=True";
+    # now (one rule for every long command) the previous run is replaced, and the one line
+    # saying so names the --resume flag
+    from kinred.experiments import table1
+
     out = tmp_path / "t1"
     (out / "store").mkdir(parents=True)
     (out / "store" / "run.json").write_text("{}")
-    rc, _, err = _cli(["paper", "table1", "--quick", "--out", out, "--executor", "serial",
-                       "--no-progress"], capsys)
-    assert rc == 2
-    _one_error_line(err, "StoreMismatch", out / "store", "--resume")
+    seen = {}
+
+    def fake_run(cfg, *, out_dir, resume, **kw):
+        seen["store"], seen["resume"] = (out_dir / "store").exists(), resume
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(table1, "run", fake_run)
+    rc, stdout, err = _cli(["paper", "table1", "--quick", "--out", out, "--executor", "serial",
+                            "--no-progress"], capsys)
+    assert rc == 130 and seen == {"store": False, "resume": False}
+    assert stdout == (f"kinred paper table1: replacing the previous run in {out}; use --resume "
+                      "to continue it\n")
+    assert "rerun with --resume to continue" in err
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """``kinred ... | head``: the reader leaves early; no traceback, exit status 141 (SIGPIPE)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, kinred.cli as c\n"
+            "def boom(args):\n    raise BrokenPipeError(32, 'Broken pipe')\n"
+            "p = c.build_parser()\n"
+            "a = p.parse_args(['quantize', 'x.toml', '--atoms', '3'])\n"
+            "a._run = boom\n"
+            "sys.exit(c._run(a))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path)
+    assert p.returncode == 141 and p.stderr == "", p.stderr
+
+
 # ---------------------------------------------------------------------------------------
 # Divergence and endless adaptive runs (issue 14): an explicit step that is unstable for the
 # scene stops with SimulationDiverged as soon as the velocity fluctuation exceeds what the

@@ -178,10 +178,9 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
     assert not (out / "summary.json").exists()
     before = {n: (out / "stages" / n).stat().st_mtime_ns for n in ("solve.npz", "reference.npz")}
     content = {n: (out / "stages" / n).read_bytes() for n in before}
-    # without --resume the folder is refused
-    assert main(["run", str(scene), "--out", str(out)]) == 2
-    assert "--resume" in capsys.readouterr().err
+    capsys.readouterr()
     assert main(["run", str(scene), "--out", str(out), "--resume"]) == 0
+    assert "replacing" not in capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     assert summary["stages"] == {"solve": "loaded", "reference": "loaded", "k1": "computed",
                                  "k2": "computed"}
@@ -202,6 +201,91 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
     err = capsys.readouterr().err
     assert "different configuration" in err
     assert "StoreMismatch" in err and "differs: config.t_final" in err
+    # without --resume the previous run is replaced, in one line, and computed afresh
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == (f"kinred run: replacing the previous run in {out}; use --resume to "
+                        "continue it")
+    assert json.loads((out / "summary.json").read_text())["t_final"] == 0.6
+    assert set(json.loads((out / "summary.json").read_text())["stages"].values()) == {"computed"}
+
+
+def test_rerun_rule(tmp_path, main, capsys):
+    """One rule: a previous `kinred run` is replaced (said so), files kinred did not write are
+    refused and left alone (exit 2), the result of another command is refused."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    assert "replacing" not in capsys.readouterr().out
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    assert capsys.readouterr().out.startswith(f"kinred run: replacing the previous run in {out};")
+    (out / "notes.txt").write_text("mine")
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"kinred: error: InvalidInput: --out {out}")
+    assert "notes.txt" in err and "kinred did not write" in err
+    assert (out / "notes.txt").read_text() == "mine" and (out / "summary.json").exists()
+    assert main(["run", str(scene), "--out", str(out), "--resume"]) == 2    # --resume too
+    # a folder holding the result of another command
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / ".kinred-result.json").write_text('{"command": "cost", "files": []}')
+    (other / "cost.json").write_text("{}")
+    capsys.readouterr()
+    assert main(["run", str(scene), "--out", str(other)]) == 2
+    assert "holds the result of `kinred cost`" in capsys.readouterr().err
+    assert (other / "cost.json").exists()
+    # an output path that is a file
+    assert main(["run", str(scene), "--out", str(scene)]) == 2
+    assert "is a file" in capsys.readouterr().err
+
+
+def test_header_explains_the_atom_count(tmp_path, main, capsys):
+    """The header names N and why it is not the requested count (a tensor grid's N = ∏ N_j),
+    labels ε as the a-priori quantization bound and gives T, dt, the k's and the backend."""
+    from kinred.commands.run import header_lines
+    from kinred.quantize import quantize
+
+    cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "cucker-smale-200.toml")
+    q = quantize(cfg.initial_measure(), atoms=cfg.atoms)
+    lines = header_lines(cfg)
+    assert max(len(line) for line in lines[1:]) <= 96          # wrapped for a terminal
+    text = " ".join(" ".join(lines).split())                   # wrapped lines joined back
+    assert cfg.atoms == 300 and q.n_atoms < 300
+    big = [c for c in q.counts if c > 1]
+    assert int(np.prod(big)) == q.n_atoms
+    assert f"N {q.n_atoms} atoms, asked for 300" in text
+    assert f"N = ∏ N_j = " in text and f"= {q.n_atoms} ({len(big)} of 400 coordinates" in text
+    assert f"ε {q.bound:.4g} (a-priori quantization bound" in text
+    assert "T 30, euler dt = 0.05" in text and "k 2, 10, 50 (gaussian" in text
+    assert "backend dense pair sums, precision double" in text
+    assert "phase space R^400" in text
+    # a mixture: the components share one accuracy, N is their sum
+    cfg = kinetic_run.load_config(ROOT / "examples" / "scenes" / "dorsogna-mill-2d.toml")
+    q = quantize(cfg.initial_measure(), atoms=cfg.atoms)
+    text = " ".join(" ".join(header_lines(cfg)).split())
+    sizes = [c.n_atoms for c in q.components]
+    assert f"{len(sizes)} × {sizes[0]} = {q.n_atoms}" in text and q.n_atoms == sum(sizes)
+    # the command prints it first (before the table), at the requested size
+    scene = tmp_path / "s.toml"
+    scene.write_text(BASE)
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("kinred run: ") and lines[1].startswith("  d        2")
+    assert any(line.startswith("  N        8 atoms, asked for 9: a tensor grid") for line in lines)
+    assert "N = ∏ N_j = 2^3 = 8 (3 of 4 coordinates" in " ".join(" ".join(lines).split())
+
+
+def test_default_folder(tmp_path, main, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(BASE)
+    assert main(["run", str(scene)]) == 0
+    assert f"report: {Path('results/run-tiny/report.html')}" in capsys.readouterr().out
+    assert (tmp_path / "results" / "run-tiny" / "summary.json").exists()
 
 
 def test_python_m_kinred_run_subprocess(tmp_path):

@@ -402,19 +402,26 @@ class CertificateObserver:
 
     def _advance(self, coef, aggs, tau_x, tau_v, alpha, h, sizes) -> None:
         """One step of the recursions (docs/certificates.md §3–§5), then the caps."""
-        ax, av = alpha
-        w, plan, n = self.w, self.plan, self.n
-        sp = plan.has_sp
-        q = coef["q"]
+        lap_x, lap_v, r_x, r_v = self._couplings(aggs)
+        L2 = self._l2_step(coef, tau_x, tau_v, alpha, h, lap_x, r_x, r_v)
+        agents = self._agent_step(coef, tau_x, tau_v, alpha, h, lap_v, lap_x + r_x + r_v)
+        L2, nbx, nbv, nfx, nfv, saturated = self._caps(L2, *agents, sizes)
+        if not (all(math.isfinite(s) for s in L2) and np.all(np.isfinite(nbx))
+                and np.all(np.isfinite(nbv))):
+            raise SimulationDiverged(
+                f"the certificate's bounds left the float64 range at step {self._step + 1} "
+                f"(|w_i| + |M v_i| up to {float(np.max(sizes['bv'])):.3g}): a run is blowing up "
+                "(explicit Euler unstable?); reduce dt", step=int(self._step + 1))
+        self.L2, self.bx, self.bv, self.fx, self.fv = L2, nbx, nbv, nfx, nfv
+        self.saturated = bool(saturated)
+
+    def _couplings(self, aggs):
+        """Per agent couplings (§2), with the coefficient margin: ``(lap_x, lap_v, r_x, r_v)``;
+        ``|Rᵢ| ≤ Σⱼ Kᵢⱼ(fᵢ + fⱼ)``, ``|(L e)ᵢ| ≤ |dᵢ| fxᵢ + Σⱼ|aᵢⱼ| fxⱼ``."""
+        n, fx, fv = self.n, self.fx, self.fv
         m = 1.0 + _ro.COEF_MARGIN
-        bx, bv, fx, fv = self.bx, self.bv, self.fx, self.fv
-        xm, xf, vm, vf = self.L2
-        # per agent couplings (§2): |Rᵢ| ≤ Σⱼ Kᵢⱼ(fᵢ + fⱼ), |(L e)ᵢ| ≤ |dᵢ| fxᵢ + Σⱼ|aᵢⱼ| fxⱼ
-        lap_v = np.zeros(n)
-        lap_x = np.zeros(n)
-        r_x = np.zeros(n)
-        r_v = np.zeros(n)
-        for term, agg in zip(plan.terms, aggs):
+        lap_v, lap_x, r_x, r_v = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        for term, agg in zip(self.plan.terms, aggs):
             if term.source == "x":
                 r_x += agg.kr * fx + agg.kmv
             else:
@@ -423,24 +430,24 @@ class CertificateObserver:
                 lap_v += agg.amv
             else:
                 lap_x += np.abs(agg.dsum) * fx + agg.amv
-        lap_v *= m
-        lap_x *= m
-        r_x *= m
-        r_v *= m
-        mixed = lap_x + r_x + r_v           # mean-free inputs of the velocity error
+        return lap_x * m, lap_v * m, r_x * m, r_v * m
 
-        rnd = 1.0 + 2.0 * _ro.gamma(n + 4)       # rounding of a weighted norm
+    def _wn(self, a) -> float:
+        """The w-weighted ℓ2 norm of ``a``, rounded up (a sum of N terms)."""
+        return math.sqrt(float(self.w @ (a * a))) * (1.0 + 2.0 * _ro.gamma(self.n + 4))
 
-        def wn(a):
-            return math.sqrt(float(w @ (a * a))) * rnd
-
-        nlx, nrx, nrv = wn(lap_x), wn(r_x), wn(r_v)
+    def _l2_step(self, coef, tau_x, tau_v, alpha, h, lap_x, r_x, r_v) -> list:
+        """The weighted-ℓ2 recursion (§3) of the mean and fluctuation parts; also advances the
+        round-off-only recursion ``self.R2``. Returns the new ``[X_m, X_f, V_m, V_f]``."""
+        ax, av = alpha
+        sp, q = self.plan.has_sp, coef["q"]
+        rnd = 1.0 + 2.0 * _ro.gamma(self.n + 4)
+        nlx, nrx, nrv = self._wn(lap_x), self._wn(r_x), self._wn(r_v)
         # norms of the defects, with room for their own rounding (sums of N·k terms)
         txm, txf, tvm, tvf = (a * rnd * (1.0 + 2.0 * _ro.gamma(self.k + 2))
-                              for a in _wnorm(tau_x, w) + _wnorm(tau_v, w))
-        rk = 1.0 + 2.0 * _ro.gamma(self.k + 2)
+                              for a in _wnorm(tau_x, self.w) + _wnorm(tau_v, self.w))
 
-        def l2(S, inx_m, inx_f, inv_m, inv_f, ax_, av_, cap):
+        def l2(S, inx_m, inx_f, inv_m, inv_f, cap):
             xm_, xf_, vm_, vf_ = S
             if sp:
                 vf_, vm_ = math.hypot(vm_, vf_), 0.0
@@ -449,32 +456,44 @@ class CertificateObserver:
                  + min(coef["A_x"] * xf_, nrx if cap else inf)
                  + min(coef["A_v"] * vf_, nrv if cap else inf))
             if sp:
-                return [xm_ + h * vf_ + inx_m + ax_, xf_ + h * vf_ + inx_f + ax_, 0.0,
-                        q * vf_ + h * c + math.hypot(inv_m, inv_f) + av_]
-            return [xm_ + h * vm_ + inx_m + ax_, xf_ + h * vf_ + inx_f + ax_,
-                    vm_ + inv_m + av_, q * vf_ + h * c + inv_f + av_]
+                return [xm_ + h * vf_ + inx_m + ax, xf_ + h * vf_ + inx_f + ax, 0.0,
+                        q * vf_ + h * c + math.hypot(inv_m, inv_f) + av]
+            return [xm_ + h * vm_ + inx_m + ax, xf_ + h * vf_ + inx_f + ax,
+                    vm_ + inv_m + av, q * vf_ + h * c + inv_f + av]
 
-        X_m, X_f, V_m, V_f = l2(self.L2, txm, txf, tvm, tvf, ax, av, True)
-        self.R2 = l2(self.R2, 0.0, 0.0, 0.0, 0.0, ax, av, False)
-        # per agent, whole errors (§4) and fluctuations (§5)
-        gn = 2.0 * _ro.gamma(n + 2)               # rounding of the weighted mean removed
+        out = l2(self.L2, txm, txf, tvm, tvf, True)
+        self.R2 = l2(self.R2, 0.0, 0.0, 0.0, 0.0, False)
+        up = 1.0 + 8.0 * _ro.U64        # the recursion's own arithmetic: a few positive terms
+        return [s * up for s in out]
+
+    def _agent_step(self, coef, tau_x, tau_v, alpha, h, lap_v, mixed):
+        """The per-agent recursions of whole errors (§4) and fluctuations (§5):
+        ``(nbx, nfx, nbv, nfv)`` (``nfv`` None with self-propulsion, set by the caps)."""
+        ax, av = alpha
+        w = self.w
+        bx, bv, fx, fv = self.bx, self.bv, self.fx, self.fv
+        rk = 1.0 + 2.0 * _ro.gamma(self.k + 2)
+        gn = 2.0 * _ro.gamma(self.n + 2)               # rounding of the weighted mean removed
         rtx, rtv = _rows(tau_x) * rk, _rows(tau_v) * rk
         dtx = _rows(tau_x - w @ tau_x) * rk + gn * float(np.max(rtx, initial=0.0))
         dtv = _rows(tau_v - w @ tau_v) * rk + gn * float(np.max(rtv, initial=0.0))
-        nbx = bx + h * bv + rtx + ax
-        nfx = fx + h * fv + dtx + 2.0 * ax
-        nbv = coef["p"] * bv + h * (lap_v + mixed) + rtv + av
-        if not sp:
-            nfv = coef["p"] * fv + h * (m * coef["kstd"] * vf + mixed) + dtv + 2.0 * av
-        # the recursions' own arithmetic: sums of a few positive terms, relative error ≤ 8u
         up = 1.0 + 8.0 * _ro.U64
-        X_m, X_f, V_m, V_f = X_m * up, X_f * up, V_m * up, V_f * up
-        nbx *= up
-        nfx *= up
-        nbv *= up
-        if not sp:
-            nfv *= up
-        # the trivial size caps: |y − Mx| ≤ |y| + |Mx| (docs §6)
+        nbx = (bx + h * bv + rtx + ax) * up
+        nfx = (fx + h * fv + dtx + 2.0 * ax) * up
+        nbv = (coef["p"] * bv + h * (lap_v + mixed) + rtv + av) * up
+        nfv = None
+        if not self.plan.has_sp:
+            m = 1.0 + _ro.COEF_MARGIN
+            vf = self.L2[3]                     # the previous step's ‖ε̃‖_w bound
+            nfv = (coef["p"] * fv + h * (m * coef["kstd"] * vf + mixed) + dtv + 2.0 * av) * up
+        return nbx, nfx, nbv, nfv
+
+    def _caps(self, L2, nbx, nfx, nbv, nfv, sizes):
+        """The trivial size caps ``|y − Mx| ≤ |y| + |Mx|`` (docs §6), then each bound caps the
+        others (``‖e‖_w ≤ ‖bx‖_w``, ``|ẽᵢ| ≤ |eᵢ| + |ē|``, ``|ẽᵢ| ≤ ‖ẽ‖_w/√wᵢ``, ...).
+        Returns ``(L2, nbx, nbv, nfx, nfv, saturated)``."""
+        sp, w = self.plan.has_sp, self.w
+        X_m, X_f, V_m, V_f = L2
         np.minimum(nbx, sizes["bx"], out=nbx)
         np.minimum(nfx, sizes["fx"], out=nfx)
         np.minimum(nbv, sizes["bv"], out=nbv)
@@ -487,17 +506,16 @@ class CertificateObserver:
             V_m, V_f = min(V_m, sizes["vm"]), min(V_f, sizes["vf"])
         # saturated: the size caps, not the recursion, decide the RMS bound
         saturated = math.hypot(math.hypot(X_m, X_f), math.hypot(V_m, V_f)) < 0.99 * before
-        # each caps the others: ‖e‖_w ≤ ‖bx‖_w, |ẽᵢ| ≤ |eᵢ| + |ē|, |ẽᵢ| ≤ ‖ẽ‖_w/√wᵢ, ...
-        wbx, wfx, wbv = wn(nbx), wn(nfx), wn(nbv)
+        wbx, wfx, wbv = self._wn(nbx), self._wn(nfx), self._wn(nbv)
         X_m, X_f = min(X_m, wbx), min(X_f, wfx, wbx)
         if sp:
             V_f = min(V_f, wbv)
             nfv = (nbv + V_f) * (1.0 + 3.0 * _ro.U64)   # |ε̃ᵢ| ≤ |εᵢ| + |ε̄|, |ε̄| ≤ ‖ε‖_w
         else:
-            wfv = wn(nfv)
+            wfv = self._wn(nfv)
             V_m, V_f = min(V_m, wbv), min(V_f, wfv, wbv)
         pos = w > 0
-        inv = np.zeros(n)
+        inv = np.zeros(self.n)
         inv[pos] = (1.0 + 4.0 * _ro.U64) / np.sqrt(w[pos])
         up2 = 1.0 + 3.0 * _ro.U64             # a rounded sum of two bounds is still one
         np.minimum(nfx, (nbx + X_m) * up2, out=nfx)
@@ -509,15 +527,7 @@ class CertificateObserver:
             np.minimum(nbv, (V_m + nfv) * up2, out=nbv)
         else:
             nbv[pos] = np.minimum(nbv[pos], V_f * inv[pos])
-        L2 = [X_m, X_f, V_m, V_f]
-        if not (all(math.isfinite(s) for s in L2) and np.all(np.isfinite(nbx))
-                and np.all(np.isfinite(nbv))):
-            raise SimulationDiverged(
-                f"the certificate's bounds left the float64 range at step {self._step + 1} "
-                f"(|w_i| + |M v_i| up to {float(np.max(sizes['bv'])):.3g}): a run is blowing up "
-                "(explicit Euler unstable?); reduce dt", step=int(self._step + 1))
-        self.L2, self.bx, self.bv, self.fx, self.fv = L2, nbx, nbv, nfx, nfv
-        self.saturated = bool(saturated)
+        return [X_m, X_f, V_m, V_f], nbx, nbv, nfx, nfv, saturated
 
     # ------------------------------------------------------------------ records
     def _record(self, t: float, state) -> None:

@@ -5,20 +5,30 @@ simulate the weighted Cucker–Smale particle system, project with k ∈ {2, 5, 
 W1 between projected and reduced solutions over time (exact, POT) next to Theorem 4.3's bound,
 estimate W1(μ_M(t), ν(t)) with a finer reference, and give the flocking verdicts. Prints a
 short table and the path of ``report.html`` (see :mod:`kinred.experiments.demo`).
+
+Results go to ``results/demo`` (``results/demo-smoke`` with ``--smoke``); a previous demo
+there is replaced (said in one line), ``--resume`` continues an interrupted one, and a folder
+holding other files is refused (the rule of :mod:`kinred.commands._output`).
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from . import _output
 
 NAME = "demo"
 HELP = "main job: quantize → kinetic solution → projected vs reduced W1 with Theorem 4.3's bound"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default="results/demo", metavar="DIR",
-                        help="result folder (default results/demo; a previous demo there is replaced)")
+    parser.add_argument("--out", default=None, metavar="DIR",
+                        help="result folder (default results/demo, results/demo-smoke with "
+                             "--smoke; a previous demo there is replaced unless --resume)")
     parser.add_argument("--resume", action="store_true", help="continue an interrupted demo in --out")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="hide the progress bar (shown on stderr when it is a terminal)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes (seconds)")
     parser.add_argument("--dim", type=int, help="dimension d (default 100)")
     parser.add_argument("--atoms", type=int, help="atom budget N (default 400; reference 3N)")
@@ -30,16 +40,15 @@ def run(args) -> int:
 
     cfg = demo.DemoConfig(d=args.dim, atoms=args.atoms, ks=tuple(args.k) if args.k else None,
                           smoke=args.smoke)
-    res = demo.run(cfg, out_dir=args.out, resume=args.resume)
-    c = res.config
-    print(f"kinred demo: d = {c.d}, N = {res.n_atoms} atoms (W1(μ₀, μ₀ᴺ) ≤ ε = {res.eps:.4g}), "
-          f"T = {c.t_final:g}, {c.method} dt = {c.dt:g}")
-    print(res.table().to_text())
-    if "w1_quantization" in res.high:
-        print(f"reference: N' = {res.high['n_atoms_reference']} atoms; W1(μᴺ(T), μᴺ'(T)) = "
-              f"{float(res.high['w1_quantization'][-1]):.4g} (exact on R^{2 * c.d})")
-    print("W1 exact (POT); bound = 2C(t)‖M‖ε + √2·D(t)·ε_JL (proof of Theorem 4.3, constants "
-          "measured, not tuned)")
-    print(f"wall time {res.wall_time:.1f} s")
+    layout = _output.LAYOUTS["demo"]
+    out = Path(args.out) if args.out else _output.default_out(
+        "demo", size="smoke" if args.smoke else None)
+    _output.prepare(out, layout, resume=args.resume)
+    res = demo.run(cfg, out_dir=out, resume=args.resume,
+                   progress=False if args.no_progress else None)
+    _output.record(out, layout)
+    print("\n".join(demo.story(res)))
+    print(f"\nwall time {res.wall_time:.1f} s; stages: "
+          + ", ".join(f"{k}: {v}" for k, v in res.stages.items()))
     print(f"report: {res.out_dir / 'report.html'}")
     return 0

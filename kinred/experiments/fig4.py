@@ -1,4 +1,4 @@
-"""The paper's Figure 4 (§3.4.2) and the three recovery strategies of §3.3.1.
+"""The paper's Figure 4 (§3.4.2).
 
 Left panel: Cucker–Smale with N = d = 200, normally distributed initial data, β = 0.4
 (flocking for any initial data since β ≤ 1/2), projected to k ∈ {20, 40, 60, 100, 140, 180};
@@ -31,8 +31,9 @@ default here: with it the projection error first grows and then decreases once t
 forms, as the paper describes; the sum convention that reproduces Table 1 is available
 (``normalize="sum"``) and recorded in the output.
 
-:func:`strategies` measures the table of §3.3.1 (1 projection into ℝᵏ, 1 into ℝᴸᵏ, L into
-ℝᵏ) at equal work: error of the recovered trajectories and wall time.
+The run is cut into stages written as they finish (``OUT/stages``, resumable: see
+:func:`run`), with a progress bar. The three recovery strategies of §3.3.1 on the same data
+are in :mod:`kinred.experiments.recovery_strategies`.
 """
 
 from __future__ import annotations
@@ -46,8 +47,9 @@ import numpy as np
 
 from .._validate import as_choice, as_float, as_int
 from ..errors import InvalidInput
+from ._staged import Staged
 
-__all__ = ["Fig4Config", "Fig4Result", "run", "strategies", "StrategiesResult"]
+__all__ = ["Fig4Config", "Fig4Result", "run", "write_outputs", "config_json"]
 
 
 @dataclass(frozen=True)
@@ -138,12 +140,11 @@ class Fig4Result:
     recovery_error: dict       # {L: (T,)}
     recovery_status: dict      # {L: fraction of converged problems}
     wall_time: float
+    stages: dict = dataclasses.field(default_factory=dict)   # {stage: "loaded" | "computed"}
 
     def to_json(self) -> dict:
-        cfg = dataclasses.asdict(self.config)
-        cfg["ks"], cfg["Ls"] = list(self.config.ks), list(self.config.Ls)
         return {
-            "config": cfg,
+            "config": config_json(self.config),
             "coupling": f"normalize={self.config.normalize!r}, G={self.config.G}",
             "eta": self.config.eta,
             "t": self.t.tolist(),
@@ -152,6 +153,7 @@ class Fig4Result:
             "recovery_error": {str(L): v.tolist() for L, v in self.recovery_error.items()},
             "recovery_converged_fraction": {str(L): f for L, f in self.recovery_status.items()},
             "wall_time_s": self.wall_time,
+            "stages": dict(self.stages),
         }
 
 
@@ -173,49 +175,117 @@ def _projected_runs(scene, x0, v0, cfg, k, n_proj, rng_seed):
     return Ms, ws
 
 
-def run(cfg: Fig4Config | None = None, *, out_dir=None, progress: bool = False) -> Fig4Result:
-    """Run both panels; with ``out_dir`` write ``fig4.json``, the figure and ``report.html``."""
-    from ..recovery import recover
+def _weights(cfg: Fig4Config) -> dict:
+    """Work units of the stages (one unit: about one step of a full N x d run)."""
+    per_left = 1 + 4 * len(cfg.ks)      # the full run steps one certificate observer per k
+    return dict(left=cfg.steps * per_left, left_per_step=per_left, sparse=cfg.steps,
+                projection=cfg.steps, recover={int(L): cfg.steps * (6 + int(L)) for L in cfg.Ls})
 
-    cfg = cfg or Fig4Config()
-    t0 = time.perf_counter()
+
+def _initial_data(cfg: Fig4Config):
+    """``(x0, v0, xs, vs)``: the dense data of the left panel and the sparse data of the right."""
     rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(0,)))
-    scene = _scene(cfg)
-
-    # Left panel: dense normal initial data, projection error per k and its certified bound.
     x0 = rng.standard_normal((cfg.N, cfg.d))
     v0 = rng.standard_normal((cfg.N, cfg.d))
-    full, proj_err, proj_bound = _left_panel(scene, x0, v0, cfg)
-
-    # Right panel: 80 % zero entries, L projections into k_recovery, l1 recovery of v(t).
     mask_x = rng.random((cfg.N, cfg.d)) >= cfg.zero_fraction
     mask_v = rng.random((cfg.N, cfg.d)) >= cfg.zero_fraction
     xs = rng.standard_normal((cfg.N, cfg.d)) * mask_x
     vs = rng.standard_normal((cfg.N, cfg.d)) * mask_v
-    full_s = _simulate(scene, xs, vs, cfg, states=True)
-    Ms, ws = _projected_runs(scene, xs, vs, cfg, cfg.k_recovery, max(cfg.Ls), 2)
-    rec_err, rec_ok = {}, {}
-    for L in cfg.Ls:
-        res = recover(Ms[:L], ws[:L], eta=cfg.eta, original=full_s.v)
-        rec_err[int(L)] = np.asarray(res.relative_error)
-        rec_ok[int(L)] = float(np.mean(res.status == "converged"))
-    result = Fig4Result(cfg, np.asarray(full.t), proj_err, proj_bound, rec_err, rec_ok,
-                        time.perf_counter() - t0)
+    return x0, v0, xs, vs
+
+
+def config_json(cfg: Fig4Config) -> dict:
+    """The configuration as JSON (tuples as lists)."""
+    out = dataclasses.asdict(cfg)
+    out["ks"], out["Ls"] = list(cfg.ks), list(cfg.Ls)
+    return out
+
+
+def run(cfg: Fig4Config | None = None, *, out_dir=None, resume: bool = False,
+        progress: bool | None = None) -> Fig4Result:
+    """Run both panels; with ``out_dir`` write ``fig4.json``, the figure and ``report.html``.
+
+    The stages (``left``: the projection errors and their bounds; ``sparse``: the full run
+    from sparse data; ``projection{l}``: the l-th projected run into k_recovery;
+    ``recover{L}``: the recovery from L projections) are written to ``out_dir/stages`` as they
+    finish; ``resume=True`` loads those present (:class:`kinred.io.StageStore`), so an
+    interrupted run resumes with the same numbers. ``progress`` shows a tqdm bar with the
+    time remaining (None: when stderr is a terminal).
+    """
+    cfg = cfg or Fig4Config()
+    if not isinstance(cfg, Fig4Config):
+        raise InvalidInput(f"cfg must be a Fig4Config, got {type(cfg).__name__}")
+    t0 = time.perf_counter()
+    w = _weights(cfg)
+    total = w["left"] + w["sparse"] + max(cfg.Ls) * w["projection"] + sum(w["recover"].values())
+    st = Staged(config_json(cfg), out_dir, resume=resume, total=total, desc="kinred paper fig4",
+                progress=progress)
+    try:
+        x0, v0, xs, vs = _initial_data(cfg)
+        scene = _scene(cfg)
+        # Left panel: dense normal initial data, projection error per k and its certified bound.
+        left = st.stage("left", w["left"], lambda: _left_arrays(
+            scene, x0, v0, cfg, st.ticker(w["left_per_step"])),
+            keys=("t",) + tuple(f"{a}{k}" for k in cfg.ks for a in ("error", "bound")))
+        proj_err = {int(k): left[f"error{k}"] for k in cfg.ks}
+        proj_bound = {int(k): left[f"bound{k}"] for k in cfg.ks}
+        rec_err, rec_ok = _right_panel(st, scene, xs, vs, cfg, w)
+    finally:
+        st.close()
+    result = Fig4Result(cfg, np.asarray(left["t"]), proj_err, proj_bound, rec_err, rec_ok,
+                        time.perf_counter() - t0, st.status)
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
 
 
-def _left_panel(scene, x0, v0, cfg):
+def _left_arrays(scene, x0, v0, cfg, tick) -> dict:
+    full, err, bound = _left_panel(scene, x0, v0, cfg, tick=tick)
+    out = {"t": np.asarray(full.t)}
+    for k in err:
+        out[f"error{k}"], out[f"bound{k}"] = err[k], bound[k]
+    return out
+
+
+def _right_panel(st: Staged, scene, xs, vs, cfg, w):
+    """80 % zero entries, L projections into k_recovery, l1 recovery of v(t), stage by stage:
+    ``({L: relative error (T,)}, {L: fraction of converged problems})``."""
+    from ..recovery import recover
+
+    sparse = st.stage("sparse", w["sparse"], lambda: {
+        "v": _simulate(scene, xs, vs, cfg, states=True, observers=[st.ticker()]).v}, keys=("v",))
+    Ms, ws = [], []
+    for ell in range(max(cfg.Ls)):
+        M = _projection(cfg, cfg.k_recovery, 2, ell)
+        ws.append(st.stage(f"projection{ell}", w["projection"], lambda M=M: {
+            "w": _simulate(scene.project(M), M.apply(xs), M.apply(vs), cfg, states=True,
+                           observers=[st.ticker()]).v}, keys=("w",))["w"])
+        Ms.append(M)
+    rec_err, rec_ok = {}, {}
+    for L in cfg.Ls:
+        def solve(L=int(L)):
+            res = recover(Ms[:L], ws[:L], eta=cfg.eta, original=sparse["v"])
+            return {"error": np.asarray(res.relative_error),
+                    "converged": np.mean(res.status == "converged")}
+
+        r = st.stage(f"recover{int(L)}", w["recover"][int(L)], solve, keys=("error", "converged"))
+        rec_err[int(L)] = np.asarray(r["error"])
+        rec_ok[int(L)] = float(r["converged"])
+    return rec_err, rec_ok
+
+
+def _left_panel(scene, x0, v0, cfg, tick=None):
     """The high-dimensional run with one certificate observer per ``k`` (each steps its
-    projected run): ``(trajectory, {k: relative error}, {k: its certified bound})``."""
+    projected run): ``(trajectory, {k: relative error}, {k: its certified bound})``;
+    ``tick`` is an extra observer (the progress bar)."""
     from ..certify import CertificateObserver
 
     steps = range(0, cfg.steps + 1, cfg.record_every)
     Ms = {int(k): _projection(cfg, k, 1, 0) for k in cfg.ks}
     obs = {k: CertificateObserver(scene, M, x0, v0, save_steps=steps, paper=False, states="v")
            for k, M in Ms.items()}
-    full = _simulate(scene, x0, v0, cfg, states=True, observers=list(obs.values()))
+    full = _simulate(scene, x0, v0, cfg, states=True,
+                     observers=list(obs.values()) + ([tick] if tick is not None else []))
     err, bound = {}, {}
     for k, M in Ms.items():
         rec = obs[k].records()
@@ -281,60 +351,10 @@ def write_outputs(result: Fig4Result, out_dir) -> Path:
     return summary
 
 
-@dataclass(frozen=True)
-class StrategiesResult:
-    """The §3.3.1 table with measured columns."""
+def __getattr__(name):
+    """``strategies`` and ``StrategiesResult`` moved to :mod:`.recovery_strategies`."""
+    if name in ("strategies", "StrategiesResult"):
+        from . import recovery_strategies
 
-    rows: list   # dicts: strategy, rows_total, sim_dim, error (final / max), wall times
-
-    def to_text(self) -> str:
-        from ..report import Table
-
-        return Table(["strategy", "projected dim", "rows of A", "simulate [s]", "recover [s]",
-                      "max error", "final error"],
-                     [[r["strategy"], r["sim_dim"], r["rows"], r["simulate_s"], r["recover_s"],
-                       r["max_error"], r["final_error"]] for r in self.rows]).to_text()
-
-
-def strategies(cfg: Fig4Config | None = None, *, L: int = 5, k: int | None = None) -> StrategiesResult:
-    """Compare the three strategies of §3.3.1 on the sparse initial data of Figure 4 (right).
-
-    1. one projection into ℝᵏ (simulate k·N² per step, recover from k rows);
-    2. one projection into ℝᴸᵏ (simulate L·k·N², recover from L·k rows);
-    3. L independent projections into ℝᵏ (L simulations of k·N², parallelizable; recover from
-       the stacked L·k rows).
-
-    Wall times are measured serially here; strategy 3's simulations are independent and run in
-    parallel in an ensemble (its parallel time is its serial time / L).
-    """
-    from .._rng import member_seed
-    from ..projection import jl_matrix
-    from ..recovery import recover
-
-    cfg = cfg or Fig4Config()
-    k = int(k or cfg.k_recovery)
-    as_int(L, "L", low=1)
-    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed, spawn_key=(3,)))
-    xs = rng.standard_normal((cfg.N, cfg.d)) * (rng.random((cfg.N, cfg.d)) >= cfg.zero_fraction)
-    vs = rng.standard_normal((cfg.N, cfg.d)) * (rng.random((cfg.N, cfg.d)) >= cfg.zero_fraction)
-    scene = _scene(cfg)
-    truth = _simulate(scene, xs, vs, cfg, states=True).v
-    rows = []
-    for name, dims in (("1 projection into R^k", [k]), ("1 projection into R^(Lk)", [L * k]),
-                       ("L projections into R^k", [k] * L)):
-        t0 = time.perf_counter()
-        Ms, ws = [], []
-        for ell, kk in enumerate(dims):
-            M = jl_matrix(kk, cfg.d, kind=cfg.kind, seed=member_seed(cfg.seed, (4, len(rows), ell)))
-            tr = _simulate(scene.project(M), M.apply(xs), M.apply(vs), cfg, states=True)
-            Ms.append(M)
-            ws.append(tr.v)
-        t_sim = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        res = recover(Ms, ws, eta=cfg.eta, original=truth)
-        t_rec = time.perf_counter() - t0
-        err = np.asarray(res.relative_error)
-        rows.append(dict(strategy=name, sim_dim=dims[0] if len(dims) == 1 else f"{L} x {k}",
-                         rows=sum(dims), simulate_s=t_sim, recover_s=t_rec,
-                         max_error=float(err.max()), final_error=float(err[-1])))
-    return StrategiesResult(rows)
+        return getattr(recovery_strategies, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

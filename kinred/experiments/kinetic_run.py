@@ -10,12 +10,14 @@ kind), the integrator and the outputs. :func:`run` then
 2. optionally solves a finer reference ``μᴺ′(t)`` (stage ``reference``);
 3. for every ``k``: draws ``M`` (seed ``member_seed(projection.seed, k)``), solves the reduced
    system ``νᴺ(t)``, computes ``W1(M#μᴺ(t), νᴺ(t))`` exactly, Theorem 4.3's bound with the
-   proof's constants, the reference estimate and the flocking / milling observables
-   (stage ``k{k}``);
+   proof's constants, the certificate of the reduced run when ``[certify]`` asks for it or it
+   is cheap (:mod:`kinred.experiments.kinetic_certify`: certified bounds of the projection
+   error and of Theorem 4.3's middle term), the reference estimate and the flocking /
+   milling observables (stage ``k{k}``);
 4. writes ``results.npz`` and ``summary.json`` (the run's numbers: the run is complete),
-   then the figures and ``report.html``. Each figure is drawn in a guarded call
-   (:func:`kinred.report.draw_figure`): a figure that cannot be drawn is replaced by a note in
-   the report, never loses the run.
+   then the figures and ``report.html`` (:mod:`kinred.experiments.kinetic_report`). Each
+   figure is drawn in a guarded call (:func:`kinred.report.draw_figure`): a figure that cannot
+   be drawn is replaced by a note in the report, never loses the run.
 
 The stages live in a :class:`kinred.io.StageStore` in ``OUT/stages`` (index ``config.json``
 with the hash of the resolved configuration, one ``.npz`` per stage written as soon as it is
@@ -26,6 +28,9 @@ folder holding a run of another configuration, or any run without ``resume``, is
 refused (:class:`~kinred.errors.DamagedFile`). Random draws of the dynamics (a random-batch
 pair sum) come from the scene's ``seed``: stage ``solve`` uses ``member_seed(seed, 0)``, the
 reference ``member_seed(seed, 1)``, and each reduced run the seed of the solution it reduces.
+
+Every number is labelled (:data:`LABELS`): measured, certified bound, a-priori bound (the
+paper's constants) or estimate; ``summary.json`` carries the labels.
 
 :class:`~kinred.scenefile.Config`, :func:`~kinred.scenefile.load_config` and
 :func:`~kinred.scenefile.config_from_dict` are importable from here too.
@@ -38,14 +43,17 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
 from .._rng import member_seed
 from ..errors import InvalidInput, KinredWarning
 from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
+from . import kinetic_certify as _cert
+from . import kinetic_report
 
-__all__ = ["RunResult", "run", "write_outputs"]
+__all__ = ["LABELS", "NOT_NUMBERS", "RunResult", "run", "write_outputs"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -63,9 +71,17 @@ class RunResult:
     per_k : dict
         ``{k: {name: array}}``: ``w1``, ``exact``, ``coupling``, ``uniform``, ``term_jl``,
         ``term_quant``, ``bound``, ``C``, ``D_eps``, ``eps_jl``, ``alpha``, ``beta``, ``Lp``,
-        ``Lpp``, ``Lambda``, ``gamma``, ``milling``, optional ``w1_reference``, ``norm_M``.
+        ``Lpp``, ``Lambda``, ``gamma``, ``milling``, optional ``w1_reference``, ``norm_M``;
+        the certificate's ``err_rms``, ``err_max`` (measured), ``cert_rms``, ``cert_max``,
+        ``cert_w1`` (certified bounds; NaN where not certified), ``cert_saturated``,
+        ``paper_rms``, ``paper_max`` (eq. (2.18), √2 × eq. (2.11)), ``bound_mixed``
+        (``term_quant + cert_w1``), ``vacuous`` (``bound`` above ``high["diameter"]``),
+        ``cert_time``, ``cert_note`` (0-d str array). What each is: :data:`LABELS`.
     high : dict
-        ``gamma``, ``milling`` of ``μᴺ(t)``; ``w1_quantization`` with a reference.
+        ``gamma``, ``milling`` of ``μᴺ(t)``; ``diameter`` (an upper bound of the diameter of
+        ``supp μᴺ(t)`` in ``ℝ²ᵈ``, O(N·d)) and ``diameter_lower`` (a distance between two
+        atoms); its atoms at T, ``x_final``, ``v_final``, ``weights`` (for the report);
+        ``w1_quantization`` with a reference.
     stages : dict
         ``{stage: "computed" | "loaded"}``.
     wall_time : float
@@ -83,24 +99,52 @@ class RunResult:
     out_dir: Path | None
 
     def table(self):
-        """The per-k summary table (a :class:`kinred.report.Table`)."""
+        """The per-k summary table (a :class:`kinred.report.Table`), every column labelled:
+        measured ``W1(T)``, its certified bound and the worst ratio certified/measured over
+        ``t ≥ 1``, Theorem 4.3's a-priori bound (``vacuous`` when above the diameter of the
+        cloud), the reference estimate when there is one, the observables."""
         from ..report import Table
 
-        cfg = self.config
-        rows = []
+        cfg, ref = self.config, "w1_reference" in next(iter(self.per_k.values()))
         g_high = self.high["gamma"][-1]
-        rows.append([f"d={cfg.d}", "", "", "", "", f"{g_high:.3g}",
-                     _verdict(g_high, cfg), f"{self.high['milling'][-1]:.3f}"])
+        rows = [[f"d={cfg.d}", "", "", "", ""] + ([""] if ref else [])
+                + [f"{g_high:.3g}", _verdict(g_high, cfg), f"{self.high['milling'][-1]:.3f}"]]
+        notes = []
         for k, r in self.per_k.items():
-            i = int(np.argmax(r["w1"]))
-            ratio = r["w1"][i] / r["term_jl"][i] if r["term_jl"][i] > 0 else float("nan")
-            rows.append([f"k={k}", float(r["w1"][-1]), float(np.max(r["w1"])),
-                         float(r["bound"][-1]), ratio, f"{r['gamma'][-1]:.3g}",
-                         _verdict(r["gamma"][-1], cfg), f"{r['milling'][-1]:.3f}"])
-        return Table(["system", "W1(T)", "max_t W1", "bound(T)", "W1/(√2·D·ε_JL) at max",
-                      "Γ(T)", "verdict", "milling(T)"], rows,
-                     caption=f"W1(M#μᴺ(t), νᴺ(t)) (exact, POT) and Theorem 4.3's bound; N = "
-                             f"{self.n_atoms}, ε = {self.eps:.4g}, T = {cfg.t_final:g}")
+            cert = float(r["cert_w1"][-1])
+            ratio = _cert.worst_ratio(r["cert_w1"], r["w1"], self.t)
+            b = float(r["bound"][-1])
+            w1 = (float(r["w1"][-1]) if bool(r["exact"][-1])
+                  else f"[{float(r['lower'][-1]):.4g}, {float(r['upper'][-1]):.4g}]")
+            row = [f"k={k}", w1, cert if np.isfinite(cert) else "not certified",
+                   ratio if np.isfinite(ratio) else "–",
+                   f"{b:.3g}" + (" (vacuous)" if bool(r["vacuous"][-1]) else "")]
+            if ref:
+                row.append(float(r["w1_reference"][-1]))
+            rows.append(row + [f"{r['gamma'][-1]:.3g}", _verdict(r["gamma"][-1], cfg),
+                               f"{r['milling'][-1]:.3f}"])
+            note = str(r["cert_note"])
+            if not note.startswith("certified"):
+                notes.append(f"k={k}: {note}")
+        exact = all(bool(r["exact"][-1]) for r in self.per_k.values())
+        head = ["system", "W1(T) measured" if exact else "W1(T) measured or [bracket]",
+                "W1(T) certified bound",
+                "certified/measured, max t≥1", "eq. (4.17)(T) a-priori bound"]
+        head += ["W1(μ_M,ν)(T) estimate"] if ref else []
+        head += ["Γ(T) measured", "verdict", "milling(T) measured"]
+        how = ("exact (POT)" if exact else "exact (POT), or where no linear program is solved "
+               "(above 10^5 atoms) a certified bracket [max-sliced lower bound, index-coupling "
+               "upper bound]")
+        cap = (f"W1 = W1(M#μᴺ(t), νᴺ(t)), {how}; its certified bound bounds the coupling "
+               f"Σᵢ wᵢ|(yᵢ, wᵢ) − M(xᵢ, vᵢ)| ≥ W1 (kinred.certify); the a-priori bound is eq. "
+               f"(4.17) with the proof's constants, vacuous where it exceeds the diameter of "
+               f"supp μᴺ (≤ {float(self.high['diameter'][-1]):.3g} at T); N = {self.n_atoms}, "
+               f"ε = {self.eps:.4g}, T = {cfg.t_final:g}")
+        if ref:
+            cap += f"; estimate: with a reference of N' = {self.high['n_atoms_reference']} atoms"
+        if notes:
+            cap += ". " + "; ".join(notes)
+        return Table(head, rows, caption=cap)
 
 
 def _verdict(g, cfg):
@@ -115,8 +159,33 @@ _SOL_KEYS = ("t", "x", "v", "weights", "eps", "n_atoms", "quantize_time", "simul
 _K_KEYS = ("k", "w1", "exact", "lower", "upper", "coupling", "uniform", "term_jl", "term_quant",
            "bound", "bound_stated", "C", "D_eps", "eps_jl", "alpha", "beta", "Lp", "Lpp",
            "Lambda", "norm_M", "L", "gamma", "milling", "y_final", "w_final", "simulate_time",
-           "wall_time")
+           "wall_time") + _cert.CERT_KEYS
 _REF_KEYS = ("w1_reference", "w1_quantization")
+
+_M, _C, _A, _E = "measured", "certified bound", "a-priori bound", "estimate"
+#: What every number of a run is (per-k arrays and ``high``): "measured", "certified bound",
+#: "a-priori bound" (the paper's constants) or "estimate". Not numbers: :data:`NOT_NUMBERS`.
+LABELS = MappingProxyType({
+    # per k: W1(M#μᴺ(t), νᴺ(t)) and the reduced run
+    "w1": _M, "exact": _M, "coupling": _M, "uniform": _M, "lower": _C, "upper": _C,
+    "err_rms": _M, "err_max": _M, "gamma": _M, "milling": _M, "y_final": _M, "w_final": _M,
+    "simulate_time": _M, "wall_time": _M, "cert_time": _M, "norm_M": _M,
+    # the certificate (kinred.certify)
+    "cert_rms": _C, "cert_max": _C, "cert_w1": _C, "cert_saturated": _C,
+    # Theorem 4.3 with the proof's constants; Theorems 2.2/2.3's right-hand sides
+    "term_jl": _A, "term_quant": _A, "bound": _A, "bound_stated": _A, "bound_mixed": _A,
+    "vacuous": _A, "paper_rms": _A, "paper_max": _A,
+    "C": _A, "D_eps": _A, "L": _A, "Lp": _A, "Lpp": _A, "Lambda": _A,
+    "eps_jl": _M, "alpha": _M, "beta": _M,
+    # a finer reference
+    "w1_reference": _E, "w1_quantization": _E,
+    # high: μᴺ(t)
+    "diameter": _C, "diameter_lower": _M, "eps_reference": _A,
+    "x_final": _M, "v_final": _M, "weights": _M,     # the atoms of μᴺ(T), for the report
+})
+#: Stage entries that are not numbers: the target dimension, the certificate's note and the
+#: reference's atom count (parameters and text).
+NOT_NUMBERS = ("k", "cert_note", "n_atoms_reference")
 
 #: Seed index of the solve and reference stages: ``member_seed(cfg.seed, index)``.
 _SEEDS = {"solve": 0, "reference": 1}
@@ -169,7 +238,8 @@ def _solution(stages, cfg: Config, name: str, atoms, eps):
     return a, _sol_from_arrays(a, cfg, seed)
 
 
-def _k_stage(cfg: Config, k: int, sol, ref):
+def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter):
+    """Stage ``k{k}``: the reduced run, W1, Theorem 4.3's bound, the certificate, observables."""
     from ..kinetic import compare, milling_index, reduce, reference_estimate, theorem_bound
     from ..observables import gamma
     from ..projection import jl_matrix
@@ -188,6 +258,8 @@ def _k_stage(cfg: Config, k: int, sol, ref):
                gamma=np.array([gamma(red.w[i], red.weights) for i in range(T)]),
                milling=np.array([milling_index(red.y[i], red.w[i], red.weights) for i in range(T)]),
                y_final=red.y[-1], w_final=red.w[-1], simulate_time=red.simulate_time)
+    out.update(_cert.certify_stage(cfg, sol, red, M, decision, w1=c.w1,
+                                   term_quant=tb.term_quant, bound=tb.bound, diameter=diameter))
     if ref is not None:
         rred = reduce(ref, M=M)
         est = reference_estimate(sol, ref, rred)
@@ -214,9 +286,6 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
     """Run a scene (see the module docstring); with ``out_dir`` write the result folder."""
     if not isinstance(cfg, Config):
         raise InvalidInput(f"cfg must be a kinred.scenefile.Config, got {type(cfg).__name__}")
-    if cfg.certify.enabled:
-        warnings.warn(f"{cfg.source}: certify.enabled: the certificate is not computed by "
-                      "kinred run yet; the run goes on without it", KinredWarning, stacklevel=2)
     t_start = time.perf_counter()
     folder, stages = _open_stages(cfg, out_dir, resume)
     names = ["solve"] + (["reference"] if cfg.reference_atoms else []) + [f"k{k}" for k in cfg.ks]
@@ -229,6 +298,11 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
     bar.set_postfix_str("solve")
     a, sol = _solution(stages, cfg, "solve", cfg.atoms, cfg.eps)
     bar.update(1)
+    decision = _cert.decide(cfg, sol)
+    if cfg.certify.enabled and not decision.on:
+        warnings.warn(f"{cfg.source}: certify.enabled: {decision.note}; the run goes on without "
+                      "certificates", KinredWarning, stacklevel=2)
+    diameter, diameter_lower = _cert.phase_diameter(a["x"], a["v"])
     r = ref = None
     if cfg.reference_atoms:
         bar.set_postfix_str("reference")
@@ -238,11 +312,13 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
     for k in cfg.ks:
         bar.set_postfix_str(f"k{k}")
         per_k[k] = stages.get_or_compute(
-            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref),
+            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter),
             load=_loader(_K_KEYS + (_REF_KEYS if ref is not None else ())))
         bar.update(1)
     bar.close()
-    high = {"gamma": a["gamma"], "milling": a["milling"]}
+    high = {"gamma": a["gamma"], "milling": a["milling"], "diameter": diameter,
+            "diameter_lower": diameter_lower, "x_final": a["x"][-1], "v_final": a["v"][-1],
+            "weights": a["weights"]}   # the last three for the report's positions figure
     if ref is not None:
         high["w1_quantization"] = per_k[cfg.ks[0]]["w1_quantization"]
         high["n_atoms_reference"] = int(r["n_atoms"])
@@ -259,88 +335,6 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
 # ------------------------------------------------------------------------------------------
 # outputs
 # ------------------------------------------------------------------------------------------
-def _fig_w1(plt, result: RunResult):
-    from ..report import fit_log_axis, legend, log_plot
-
-    t = result.t
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for k, r in result.per_k.items():
-        line = log_plot(ax, t[1:], r["w1"][1:], "-o", ms=3, label=f"W1, k={k}")
-        color = None if line is None else line.get_color()
-        log_plot(ax, t[1:], r["term_jl"][1:], "--", color=color, lw=1, label=f"√2·D(t)·ε_JL, k={k}")
-        if "w1_reference" in r:
-            log_plot(ax, t[1:], r["w1_reference"][1:], ":", color=color, lw=1.5,
-                     label=f"reference N'={result.high.get('n_atoms_reference')}, k={k}")
-    fit_log_axis(ax)
-    ax.set_xlabel("t")
-    ax.set_ylabel("W1 on R^{2k}")
-    ax.set_title("W1(M#μᴺ(t), νᴺ(t)) (exact) and Theorem 3.1's term of the bound")
-    legend(ax, fontsize=7, ncol=2)
-    return fig
-
-
-def _fig_bound(plt, result: RunResult):
-    from ..report import fit_log_axis, legend, log_plot
-
-    k0 = result.config.ks[0]
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for k, r in result.per_k.items():
-        log_plot(ax, result.t, r["bound"], label=f"bound, k={k}")
-    log_plot(ax, result.t, result.per_k[k0]["term_quant"], "k:", label=f"2C(t)‖M‖ε, k={k0}")
-    fit_log_axis(ax)
-    ax.set_xlabel("t")
-    ax.set_title("Theorem 4.3: 2C(t)‖M‖ε + √2·D(t)·ε_JL")
-    legend(ax, fontsize=8)
-    return fig
-
-
-def _fig_observables(plt, result: RunResult):
-    from ..report import finite_values, fit_log_axis, legend, log_plot
-
-    cfg, t = result.config, result.t
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    log_plot(axes[0], t, result.high["gamma"], "k-", lw=2, label=f"μᴺ, d={cfg.d}")
-    for k, r in result.per_k.items():
-        log_plot(axes[0], t, r["gamma"], label=f"νᴺ, k={k}")
-        axes[1].plot(t, finite_values(r["milling"]), label=f"νᴺ, k={k}")
-    axes[1].plot(t, finite_values(result.high["milling"]), "k-", lw=2, label=f"μᴺ, d={cfg.d}")
-    fit_log_axis(axes[0])
-    axes[0].set_title("velocity fluctuation Γ(t)")
-    axes[1].set_title("milling index (angular momentum)")
-    for ax in axes:
-        ax.set_xlabel("t")
-        legend(ax, fontsize=7)
-    return fig
-
-
-def _fig_positions(plt, result: RunResult):
-    k0 = result.config.ks[0]
-    y = np.asarray(result.per_k[k0]["y_final"], dtype=float)
-    y = y[np.all(np.isfinite(y), axis=1)]
-    fig, ax = plt.subplots(figsize=(5.5, 5))
-    ax.scatter(y[:, 0], y[:, 1] if y.shape[1] > 1 else np.zeros(len(y)), s=6)
-    ax.set_title(f"reduced positions at T, k={k0} (first two coordinates)")
-    ax.set_aspect("equal", adjustable="datalim")
-    return fig
-
-
-def _figures(result: RunResult):
-    """The report's figures, each drawn in a guarded call (a list of DrawnFigure)."""
-    from ..report import draw_figure
-
-    k0 = result.config.ks[0]
-    return [
-        draw_figure("w1_vs_time.png", "W1 between projected and reduced solutions, with the "
-                    "bound's √2·D(t)·ε_JL term (dashed)", _fig_w1, result),
-        draw_figure("bound.png", "The right-hand side of eq. (4.17) with the proof's constants",
-                    _fig_bound, result),
-        draw_figure("observables.png", "Flocking (Γ) and milling observables", _fig_observables,
-                    result),
-        draw_figure("positions_final.png", f"Reduced particle positions at T (k={k0})",
-                    _fig_positions, result),
-    ]
-
-
 def _summary(result: RunResult) -> dict:
     cfg = result.config
     return {
@@ -354,62 +348,24 @@ def _summary(result: RunResult) -> dict:
                            "term_jl_final": float(r["term_jl"][-1]),
                            "under_bound": bool(np.all(r["w1"] <= r["bound"] + 1e-12)),
                            "under_term_jl": bool(np.all(r["w1"] <= r["term_jl"] + 1e-12)),
+                           **_cert.summary_numbers(result.t, r),
                            "gamma_final": float(r["gamma"][-1]),
                            "verdict": _verdict(r["gamma"][-1], cfg),
                            "milling_final": float(r["milling"][-1])}
                    for k, r in result.per_k.items()},
         "high": {"gamma_final": float(result.high["gamma"][-1]),
                  "verdict": _verdict(result.high["gamma"][-1], cfg),
-                 "milling_final": float(result.high["milling"][-1])},
+                 "milling_final": float(result.high["milling"][-1]),
+                 "diameter_final": float(result.high["diameter"][-1]),
+                 "diameter_lower_final": float(result.high["diameter_lower"][-1])},
+        "labels": _labels(result),
     }
 
 
-def _k_table(result: RunResult, k, r):
-    from ..report import Table
-
-    rows = []
-    for i, ti in enumerate(result.t):
-        row = [float(ti), float(r["w1"][i]), bool(r["exact"][i]), float(r["coupling"][i]),
-               float(r["uniform"][i]), float(r["term_jl"][i]), float(r["term_quant"][i]),
-               float(r["bound"][i]), float(r["eps_jl"][i]), float(r["C"][i])]
-        if "w1_reference" in r:
-            row += [float(r["w1_reference"][i]), float(r["w1_quantization"][i])]
-        rows.append(row)
-    head = ["t", "W1 (exact)", "exact", "coupling ≥ W1", "E(t)", "√2·D·ε_JL", "2C‖M‖ε",
-            "bound", "ε_JL", "C(t)"]
-    if "w1_reference" in r:
-        head += ["W1 ref (estimate of W1(μ_M,ν))", "W1(μᴺ, μᴺ′) on R^{2d}"]
-    return Table(head, rows, caption=f"k = {k}: measured vs bound over time")
-
-
-def _report(result: RunResult, figures):
-    from ..report import Report
-
-    cfg = result.config
-    rep = Report(f"kinred run: {cfg.title}",
-                 subtitle=(cfg.description + " " if cfg.description else "") +
-                 f"d = {cfg.d}, N = {result.n_atoms} atoms (quantization bound ε = {result.eps:.4g}), "
-                 f"k ∈ {list(cfg.ks)} ({cfg.kind}), {cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}"
-                 + (" [smoke sizes]" if cfg.smoke else "") + f"; wall time {result.wall_time:.1f} s.")
-    s = rep.section("Summary", [
-        "W1(M#μᴺ(t), νᴺ(t)) is exact (POT network simplex on the two atomic measures on R^{2k}). "
-        "The bound is the right-hand side of eq. (4.17) as its proof yields it: "
-        "2C(t)‖M‖ε + √2·D(t)·ε_JL with C(t) = exp(Λt) (Dobrushin stability), D(t)·ε_JL the RHS of "
-        "eq. (3.7) with α, β, ε_JL measured on the trajectories (running maxima at saved times) "
-        "and L, L′, L″ from the effects' kernels (docs/kinetic.md). The bound is not tuned.",
-        "Flocking verdict: the paper's rule on Γ(T): pos if < %g, neg if > %g, n/a otherwise."
-        % (cfg.yes_below, cfg.no_above)])
-    s.tables.append(result.table())
-    for k, r in result.per_k.items():
-        sec = rep.section(f"k = {k}", [
-            f"‖M‖ = {float(r['norm_M']):.4g}; final constants: α = {float(r['alpha'][-1]):.4g}, "
-            f"β = {float(r['beta'][-1]):.4g}, L = {float(r['L']):g}, L′ = {float(r['Lp'][-1]):.4g}, "
-            f"L″ = {float(r['Lpp'][-1]):.4g}, Λ = {float(r['Lambda'][-1]):.4g}."])
-        sec.tables.append(_k_table(result, k, r))
-    fsec = rep.section("Figures")
-    for drawn in figures:
-        fsec.add_drawn(drawn)
-    return rep
+def _labels(result: RunResult) -> dict:
+    """``{name: label}`` of every per-k and ``high`` array of the run (:data:`LABELS`)."""
+    names = set(result.high) | {n for r in result.per_k.values() for n in r}
+    return {n: LABELS[n] for n in sorted(names) if n not in NOT_NUMBERS}
 
 
 def write_outputs(result: RunResult, folder) -> Path:
@@ -419,7 +375,9 @@ def write_outputs(result: RunResult, folder) -> Path:
     drawn in a guarded call, and one that fails is replaced by a note in the report. Returns
     the path of ``summary.json``.
     """
-    arrays = {"t": result.t, "gamma_high": result.high["gamma"], "milling_high": result.high["milling"]}
+    arrays = {"t": result.t, "gamma_high": result.high["gamma"],
+              "milling_high": result.high["milling"], "diameter_high": result.high["diameter"],
+              "diameter_lower_high": result.high["diameter_lower"]}
     skip = {"y_final", "w_final"}
     for k, r in result.per_k.items():
         for name, val in r.items():
@@ -427,9 +385,9 @@ def write_outputs(result: RunResult, folder) -> Path:
                 arrays[f"k{k}_{name}"] = np.asarray(val)
     folder.write_npz("results.npz", arrays)
     summary = folder.mark_complete(_summary(result))
-    figures = _figures(result)
+    figures = kinetic_report.figures(result)
     for drawn in figures:
         if drawn.png is not None:
             folder.write_bytes(drawn.name, drawn.png)
-    folder.write_text("report.html", _report(result, figures).to_html())
+    folder.write_text("report.html", kinetic_report.report(result, figures).to_html())
     return summary

@@ -54,6 +54,12 @@ class Trajectory:
         Step size (initial step for adaptive methods).
     n_rejected : int
         Rejected steps (adaptive methods).
+    weights : (N,) ndarray or None
+        Probability weights of the agents when the scene has them (None: uniform).
+    scene : str
+        Description of the scene (its effects and coupling convention).
+    seed : None, int, SeedSequence or Generator
+        The ``seed`` the run was given.
     """
 
     t: np.ndarray
@@ -66,6 +72,43 @@ class Trajectory:
     wall_time: float
     dt: float
     n_rejected: int = 0
+    weights: np.ndarray | None = None
+    scene: str = ""
+    seed: Any = None
+
+    def to_xarray(self):
+        """The trajectory as an ``xarray.Dataset`` (needs the optional extra ``xarray``).
+
+        Dimensions ``time`` (coordinate: the saved times), ``agent`` and ``coordinate``
+        (integer labels); data variables ``x`` and ``v`` ``(time, agent, coordinate)`` when
+        the states were saved, ``weights`` ``(agent,)`` for a weighted scene, and one
+        variable per observable (``(time,)``, or ``(time, <name>_dim1, ...)``); attributes:
+        ``method``, ``dt``, ``n_steps``, ``n_rejected``, ``n_rhs_evals``, ``wall_time_s``,
+        ``scene`` (its description), ``seed`` (as given; a non-integer seed as text) and
+        ``kinred_version``. NetCDF or Zarr are then one call away
+        (``ds.to_netcdf("run.nc")``, ``ds.to_zarr("run.zarr")``).
+
+        Returns
+        -------
+        xarray.Dataset
+
+        Raises
+        ------
+        MissingDependency
+            xarray is not installed (``pip install 'kinred[xarray]'``).
+
+        Examples
+        --------
+        >>> from kinred.dynamics import Scene, Alignment
+        >>> tr = simulate(Scene([Alignment()]), np.zeros((3, 2)), np.eye(3)[:, :2], (0, 1),
+        ...               0.5, save=SaveAt(states=True))
+        >>> ds = tr.to_xarray()  # doctest: +SKIP
+        >>> ds["x"].dims, ds.attrs["method"]  # doctest: +SKIP
+        (('time', 'agent', 'coordinate'), 'euler')
+        """
+        from ._export import to_xarray
+
+        return to_xarray(self)
 
 
 @dataclass
@@ -193,7 +236,17 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     return Trajectory(t=np.asarray(run.grid.times, dtype=float), observables=rec.observables(),
                       x=rec.X, v=rec.V, method=run.method, n_steps=int(n_steps),
                       n_rhs_evals=run.f.n_evals, wall_time=time.perf_counter() - t_start,
-                      dt=run.dt, n_rejected=int(run.control.n_rejected))
+                      dt=run.dt, n_rejected=int(run.control.n_rejected),
+                      weights=None if scene.weights is None else np.array(scene.weights),
+                      scene=_describe(scene), seed=seed)
+
+
+def _describe(scene: Scene) -> str:
+    """One line naming the scene's effects and coupling convention (weights not listed)."""
+    text = f"Scene({list(scene.effects)!r}, normalize={scene.normalize!r}"
+    if scene.weights is not None:
+        text += ", weighted agents"
+    return text + ")"
 
 
 def _loop(r: _Run) -> int:

@@ -10,9 +10,11 @@ See docs/kinetic.md.
 """
 
 from ._bounds import (
+    EXACT_DIAMETER_MAX,
     EffectConstants,
     TheoremBound,
     d_estimate,
+    diameter_bounds,
     effect_constants,
     max_pairwise_distance,
     stability_constant,
@@ -45,6 +47,8 @@ __all__ = [
     "d_estimate",
     "stability_constant",
     "max_pairwise_distance",
+    "diameter_bounds",
+    "EXACT_DIAMETER_MAX",
     "KineticSolution",
     "ReducedSolution",
     "Comparison",

@@ -41,7 +41,9 @@ so kinred evaluates :math:`B(t) = 2C(t)\|M\|\varepsilon + \sqrt2\,D(t)\varepsilo
 A-priori quantities (``α`` of (3.3), ``β`` of (3.6), the speed bound ``β_v`` of §3.3.2, the
 support diameters used by ``Λ``) are *measured* on the simulated trajectories of both
 systems at the saved times, as running maxima over ``[0, t]`` (the theorem applied on
-``[0, t]``); positions are taken relative to the initial centroid (every supported effect is
+``[0, t]``); diameters (``α`` included) exactly up to :data:`EXACT_DIAMETER_MAX` atoms, above
+by the O(N·d) upper bound of :func:`diameter_bounds` (the bound grows with them, so it stays
+an upper bound); positions are taken relative to the initial centroid (every supported effect is
 translation invariant, and ``y − Mx`` is unchanged by the shift). Between saved times nothing
 is checked: this is an a-posteriori evaluation, not a certificate.
 
@@ -85,7 +87,16 @@ __all__ = [
     "stability_constant",
     "theorem_bound",
     "max_pairwise_distance",
+    "diameter_bounds",
+    "EXACT_DIAMETER_MAX",
 ]
+
+#: Up to this many points :func:`theorem_bound` takes diameters exactly
+#: (:func:`max_pairwise_distance`, O(N²m)); above, the O(N·m) upper bound of
+#: :func:`diameter_bounds` (an upper bound of a diameter keeps the bound an upper bound).
+EXACT_DIAMETER_MAX = 4096
+
+_U = 2.0 ** -53
 
 
 @dataclass(frozen=True)
@@ -244,6 +255,59 @@ def max_pairwise_distance(Z) -> float:
     return math.sqrt(max(best, 0.0))
 
 
+def diameter_bounds(Z) -> tuple[float, float]:
+    r"""``(lower, upper)`` with ``lower ≤ max_{i,j} ‖zᵢ − zⱼ‖ ≤ upper`` for ``Z (N, m)``, in O(N·m).
+
+    * ``upper = 2 minₖ maxᵢ ‖zᵢ − cₖ‖`` over two centres ``cₖ`` (the mean and the centre of
+      the bounding box), since ``‖zᵢ − zⱼ‖ ≤ ‖zᵢ − c‖ + ‖c − zⱼ‖``; enlarged by the rounding of
+      the subtraction and of the norms, so it is an upper bound of the exact diameter of the
+      stored points. At most twice the diameter (the mean lies in the convex hull, so
+      ``maxᵢ ‖zᵢ − mean‖ ≤ diameter``).
+    * ``lower``: a double sweep, the largest distance seen from the point farthest from the
+      mean and from the point farthest from that one (a distance between two points: a
+      lower bound, in practice close to the diameter).
+
+    Examples
+    --------
+    >>> lo, up = diameter_bounds(np.array([[0.0, 0.0], [3.0, 4.0], [1.0, 1.0]]))
+    >>> lo, bool(5.0 <= up <= 5.0 * (1 + 1e-12))
+    (5.0, True)
+    """
+    Z = np.asarray(Z, float)
+    if Z.ndim != 2:
+        raise InvalidInput(f"Z must be a 2-D array (points, coordinates), got shape {Z.shape}")
+    n, m = Z.shape
+    if n < 2 or m == 0:
+        return 0.0, 0.0
+    lo_box, hi_box = Z.min(axis=0), Z.max(axis=0)
+    best = math.inf
+    far = 0
+    for c in (Z.mean(axis=0), 0.5 * (lo_box + hi_box)):
+        r = np.sqrt(np.einsum("ij,ij->i", Z - c, Z - c))
+        i = int(np.argmax(r))
+        scale = float(np.max(np.abs(Z))) + float(np.max(np.abs(c)))
+        # |fl(z − c) − (z − c)| ≤ u(|z| + |c|) per coordinate; the norm adds (m + 2)u relative
+        rad = float(r[i]) * (1.0 + 2.0 * (m + 4) * _U) + 2.0 * _U * math.sqrt(m) * scale
+        if rad < best:
+            best, far = rad, i
+    upper = 2.0 * best * (1.0 + 4.0 * _U)
+    lower = 0.0
+    p = far
+    for _ in range(2):
+        r = np.sqrt(np.einsum("ij,ij->i", Z - Z[p], Z - Z[p]))
+        q = int(np.argmax(r))
+        lower = max(lower, float(r[q]))
+        p = q
+    return lower, max(upper, lower)
+
+
+def _diameter(Z) -> float:
+    """The diameter exactly up to :data:`EXACT_DIAMETER_MAX` points, else an upper bound."""
+    if Z.shape[0] <= EXACT_DIAMETER_MAX:
+        return max_pairwise_distance(Z)
+    return diameter_bounds(Z)[1]
+
+
 @dataclass(frozen=True)
 class TheoremBound:
     r"""Theorem 4.3's bound at the saved times, with every piece.
@@ -353,7 +417,8 @@ def theorem_bound(solution, reduced, *, eps: float | None = None) -> TheoremBoun
     norm_M = P.norm()
     measured = _measure_a_priori(solution, reduced)
     rates = _effect_rates(solution.scene, len(solution.weights), measured)
-    return _assemble(np.asarray(solution.t, float), float(eps), norm_M, measured, rates)
+    return _assemble(np.asarray(solution.t, float), float(eps), norm_M, measured, rates,
+                     n_atoms=len(solution.weights))
 
 
 @dataclass(frozen=True)
@@ -384,6 +449,18 @@ def _distance_sources(scene) -> set:
     return sources
 
 
+def _operator_distortion(P) -> float:
+    """An upper bound of every pair's distortion ``| |M(xᵢ − xⱼ)| / |xᵢ − xⱼ| − 1 |`` from
+    ``M`` alone: the ratio lies in ``[σ_min, σ_max]`` (``σ_min = 0`` when ``k < d``), so the
+    distortion is at most ``max(1 − σ_min, σ_max − 1)`` (rounded up). Used above
+    :data:`EXACT_DIAMETER_MAX` atoms, where the ``O(N²)`` pairs of (3.4) are not measured; it
+    keeps the a-priori bound an upper bound (larger, and vacuous as it mostly is anyway)."""
+    A = np.asarray(P.matrix if hasattr(P, "matrix") else P, dtype=float)
+    s = np.linalg.svd(A, compute_uv=False)
+    lo = float(s.min()) if A.shape[0] >= A.shape[1] else 0.0
+    return max(1.0 - lo, float(s.max()) - 1.0) * (1.0 + 1e-12) + 1e-15
+
+
 def _measure_a_priori(solution, reduced) -> _APriori:
     """``α`` (3.3), ``ε_JL`` (3.4), ``β`` (3.6), ``β_v`` and the support diameters.
 
@@ -404,19 +481,24 @@ def _measure_a_priori(solution, reduced) -> _APriori:
     n = X.shape[1]
     alpha_t = np.zeros(T)
     eps_t = np.zeros(T)
+    def distortion(Z):
+        if n > EXACT_DIAMETER_MAX:                 # O(T N² d) pairs: the operator bound instead
+            return np.full(T, _operator_distortion(P))
+        return np.nan_to_num(trajectory_distortion(P, Z).eps_t)
+
     if "x" in sources and n > 1:
-        alpha_t = np.maximum(alpha_t, [max_pairwise_distance(X[i]) for i in range(T)])
-        eps_t = np.maximum(eps_t, np.nan_to_num(trajectory_distortion(P, X).eps_t))
+        alpha_t = np.maximum(alpha_t, [_diameter(X[i]) for i in range(T)])
+        eps_t = np.maximum(eps_t, distortion(X))
     if "v" in sources and n > 1:
-        alpha_t = np.maximum(alpha_t, [max_pairwise_distance(V[i]) for i in range(T)])
-        eps_t = np.maximum(eps_t, np.nan_to_num(trajectory_distortion(P, V).eps_t))
+        alpha_t = np.maximum(alpha_t, [_diameter(V[i]) for i in range(T)])
+        eps_t = np.maximum(eps_t, distortion(V))
     if "speed" in sources:
         alpha_t = np.maximum(alpha_t, np.linalg.norm(V, axis=2).max(axis=1))
         eps_t = np.maximum(eps_t, _speed_distortion(P, V))
     beta_t = np.maximum(np.linalg.norm(Y, axis=2).max(axis=1), np.linalg.norm(W, axis=2).max(axis=1))
     speed_t = np.maximum(np.linalg.norm(V, axis=2).max(axis=1), np.linalg.norm(W, axis=2).max(axis=1))
-    dx_t = np.array([max(max_pairwise_distance(X[i]), max_pairwise_distance(Y[i])) for i in range(T)])
-    dv_t = np.array([max(max_pairwise_distance(V[i]), max_pairwise_distance(W[i])) for i in range(T)])
+    dx_t = np.array([max(_diameter(X[i]), _diameter(Y[i])) for i in range(T)])
+    dv_t = np.array([max(_diameter(V[i]), _diameter(W[i])) for i in range(T)])
     run = np.maximum.accumulate
     return _APriori(eps_jl=run(eps_t), alpha=run(alpha_t), beta=run(beta_t), speed=run(speed_t),
                     diam_x=run(dx_t), diam_v=run(dv_t))
@@ -460,7 +542,8 @@ def _effect_rates(scene, n_agents: int, measured: _APriori) -> _Rates:
     return _Rates(L=L, Lp=Lp, Lpp=Lpp, Lambda=Lam, effects=consts, covered=covered)
 
 
-def _assemble(times: np.ndarray, eps: float, norm_M: float, m: _APriori, r: _Rates) -> TheoremBound:
+def _assemble(times: np.ndarray, eps: float, norm_M: float, m: _APriori, r: _Rates,
+              n_atoms: int = 0) -> TheoremBound:
     """``2 C(t) ‖M‖ ε + √2 D(t) ε_JL`` (the proof of Theorem 4.3) and the statement's form."""
     t = times - float(times[0])
     D_eps = np.atleast_1d(d_estimate(t, m.eps_jl, m.alpha, m.beta, r.L, r.Lp, r.Lpp, norm_M))
@@ -473,6 +556,9 @@ def _assemble(times: np.ndarray, eps: float, norm_M: float, m: _APriori, r: _Rat
         bound_stated = (2.0 * C * norm_M + jl_part) * norm_M * np.maximum(eps, m.eps_jl)
     note = ("bound = 2 C(t) ||M|| eps + sqrt(2) D(t) eps_JL (proof of Theorem 4.3); constants "
             "measured at saved times as running maxima")
+    if n_atoms > EXACT_DIAMETER_MAX:
+        note += (f"; diameters and alpha: O(N d) upper bounds, eps_JL: the operator bound "
+                 f"max(1 - s_min(M), s_max(M) - 1) (N = {n_atoms} > {EXACT_DIAMETER_MAX})")
     if not r.covered:
         note += "; some effect is outside Theorems 3.1/4.3 (noise or unknown): bound is nan/inf"
     return TheoremBound(t=times, eps=eps, norm_M=norm_M, eps_jl=m.eps_jl, alpha=m.alpha,

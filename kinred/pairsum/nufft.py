@@ -158,7 +158,7 @@ class NUFFT:
     tol : float
         Requested relative accuracy of each pair-sum field, ``0 < tol < 1``: the kernel's
         truncation tail, finufft's ``ε`` and the window are set from it (see
-        :mod:`kinred.pairsum._fastsum`). Measured relative field error
+        ``kinred.pairsum._fastsum``). Measured relative field error
         ``‖F_nufft − F_dense‖ / ‖F_dense‖`` on random clouds (N = 500 and 1000; k = 1, 2, 3;
         diameters 1e-6 to 10; Cucker–Smale β = 1.5 and soft Morse; weighted, far from the
         origin): below about ``0.2·tol`` for ``tol`` from 1e-2 to 1e-8, typically ``tol/10``

@@ -1,7 +1,9 @@
 """Figures and self-contained HTML reports.
 
 This is the only package of kinred that imports matplotlib (lazily, with the ``Agg``
-backend), so that the numerical core never pays for it.
+backend), so that the numerical core never pays for it. Reports can be checked and
+photographed in headless Chromium: ``python -m kinred.report.screenshot REPORT.html --out
+shot.png`` (:mod:`kinred.report.screenshot`).
 """
 
 from ._html import Report, Section, Table, validate_report_html

@@ -130,15 +130,29 @@ def log_plot(ax, x, y, *fmt, **kwargs):
     """Plot the positive finite points of ``y`` against ``x`` on a log y-axis.
 
     Returns the line, or ``None`` when ``y`` has no such point (no curve and no legend
-    entry). Autoscaling of the y-axis is switched off: call :func:`fit_log_axis` after the
-    last curve.
+    entry). A curve with a single such point gets a marker (a lone point of a line style
+    would be invisible). Autoscaling of the y-axis is switched off: call :func:`fit_log_axis`
+    after the last curve.
+
+    Examples
+    --------
+    >>> plt = pyplot()
+    >>> fig, ax = plt.subplots()
+    >>> log_plot(ax, [0, 1, 2], [float("inf"), float("inf"), 0.0]) is None
+    True
+    >>> log_plot(ax, [0, 1, 2], [3.0, float("inf"), float("inf")], "--").get_marker()
+    'o'
+    >>> plt.close(fig)
     """
     ly = log_values(y)
-    if not np.any(np.isfinite(ly)):
+    finite = int(np.count_nonzero(np.isfinite(ly)))
+    if not finite:
         return None
     ax.set_yscale("log")
     ax.set_autoscaley_on(False)
     (line,) = ax.plot(x, ly, *fmt, **kwargs)
+    if finite == 1 and line.get_marker() in ("None", None, "", " "):
+        line.set_marker("o")
     return line
 
 

@@ -29,9 +29,14 @@ to the list in ``_registry.py``. :func:`run`, the progress total, the headline, 
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
 
 from ..._validate import as_choice, as_int
 from ...errors import InvalidInput
@@ -144,10 +149,12 @@ class CostResult:
     machine: dict
     wall_time: float
     study_times: dict = field(default_factory=dict)
+    stages: dict = field(default_factory=dict)      # {study: "loaded" | "computed"}
 
     def to_json(self) -> dict:
         return to_jsonable({"config": self.config.to_json(), "machine": self.machine,
                             "wall_time_s": self.wall_time, "study_wall_time_s": self.study_times,
+                            "stages": self.stages,
                             "headline": self.headline, **self.studies})
 
 
@@ -165,14 +172,21 @@ def headline(studies: Mapping, cfg: CostConfig) -> dict:
     return out
 
 
-def run(cfg: CostConfig | None = None, *, out_dir=None, progress: bool = True) -> CostResult:
+def run(cfg: CostConfig | None = None, *, out_dir=None, resume: bool = False,
+        progress: bool = True) -> CostResult:
     """Run the studies of ``cfg``; with ``out_dir`` write the result folder (:func:`write_outputs`).
+
+    Each study's numbers are written to ``out_dir/stages/<study>.npz`` (a JSON document in
+    an ``.npz`` archive, a :class:`kinred.io.StageStore`) as soon as it finishes.
 
     Parameters
     ----------
     cfg : CostConfig, optional
         Default: the full study (:class:`CostConfig`).
     out_dir : path, optional
+    resume : bool
+        Load the studies already in ``out_dir/stages`` (with the times measured when they
+        ran) and measure only the others; the store must hold a run of the same ``cfg``.
     progress : bool
         tqdm bar on stderr (with time remaining).
 
@@ -180,20 +194,57 @@ def run(cfg: CostConfig | None = None, *, out_dir=None, progress: bool = True) -
     -------
     CostResult
     """
+    from ...io import StageStore
+
     cfg = CostConfig() if cfg is None else cfg
     if not isinstance(cfg, CostConfig):
         raise InvalidInput(f"cfg must be a CostConfig, got {type(cfg).__name__}")
     chosen = [(n, s) for n, s in REGISTRY.items() if n in cfg.studies]
+    digest = hashlib.sha256(json.dumps(cfg.to_json(), sort_keys=True).encode()).hexdigest()
+    stages = StageStore(None if out_dir is None else Path(out_dir) / "stages", digest,
+                        resume=resume, describe={"config": cfg.to_json()}, item="study")
     t0 = time.perf_counter()
     studies, times = {}, {}
     with progress_bar(sum(s.n_units(cfg.configs[n]) for n, s in chosen), progress) as bar:
         for name, study in chosen:
             bar.set_postfix_str(name)
-            ts = time.perf_counter()
-            studies[name] = study.run(cfg.configs[name], seed=cfg.seed, bar=bar)
-            times[name] = time.perf_counter() - ts
+            start = bar.n
+            doc = _document(stages.get_or_compute(
+                name, lambda name=name, study=study: _measure(study, cfg, name, bar),
+                load=_load_study))
+            studies[name], times[name] = doc["result"], doc["wall_time_s"]
+            bar.update(max(0, start + study.n_units(cfg.configs[name]) - bar.n))
     result = CostResult(cfg, studies, headline(studies, cfg), machine_info(),
-                        time.perf_counter() - t0, times)
+                        time.perf_counter() - t0, times, dict(stages.status))
     if out_dir is not None:
         write_outputs(result, out_dir)
     return result
+
+
+def _measure(study: Study, cfg: CostConfig, name: str, bar) -> dict:
+    """Run one study; its numbers as a JSON document in a one-array ``.npz`` stage."""
+    ts = time.perf_counter()
+    numbers = study.run(cfg.configs[name], seed=cfg.seed, bar=bar)
+    doc = {"result": to_jsonable(numbers), "wall_time_s": time.perf_counter() - ts}
+    return {"json": np.array(json.dumps(doc))}
+
+
+def _document(arrays: dict) -> dict:
+    """The JSON document of a study stage (ValueError if it is not one)."""
+    doc = json.loads(str(arrays["json"]))
+    if not isinstance(doc, dict) or not {"result", "wall_time_s"} <= set(doc):
+        raise ValueError("no result or wall_time_s")
+    return doc
+
+
+def _load_study(path) -> dict:
+    """Read back a study stage written by :func:`_measure` (damaged: DamagedFile)."""
+    from ...errors import DamagedFile
+    from ...io import read_npz
+
+    arrays = read_npz(path, what="study file", keys=("json",))
+    try:
+        _document(arrays)
+    except ValueError as exc:
+        raise DamagedFile(f"{path}: damaged study file: {exc}", path=str(path)) from None
+    return arrays

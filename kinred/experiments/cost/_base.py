@@ -247,6 +247,54 @@ def draw_front(ax, times, errors) -> None:
         ax.step(t, e, where="post", color="0.6", lw=4, alpha=0.35, zorder=0, label="Pareto front")
 
 
+def label_points(ax, xs, ys, texts, *, color=None, fontsize: int = 7) -> None:
+    """Write ``texts`` next to the points ``(xs, ys)`` of ``ax`` without overlaps.
+
+    Each label takes the first of a few offsets (right-above, right-below, left-above,
+    left-below, further out) whose box does not overlap a label already placed on the axes
+    (the axes keep the boxes, so successive calls avoid each other). Call it after the
+    curves are drawn, so that the axis limits are final.
+    """
+    ax.autoscale_view()
+    fig = ax.figure
+    px = fig.dpi / 72.0                       # pixels per point
+    placed = ax.__dict__.setdefault("_kinred_label_boxes", [])
+    offsets = [(4, 3), (4, -3 - fontsize), (-4, 3), (-4, -3 - fontsize), (4, 3 + 1.6 * fontsize),
+               (4, -3 - 2.6 * fontsize), (-4, 3 + 1.6 * fontsize), (-4, -3 - 2.6 * fontsize)]
+    for x, y, text in zip(xs, ys, texts):
+        if not (np.isfinite(x) and np.isfinite(y)) or (ax.get_yscale() == "log" and y <= 0):
+            continue
+        X, Y = ax.transData.transform((x, y))
+        w, h = 0.62 * fontsize * len(text) * px, fontsize * px
+        for dx, dy in offsets:
+            left = X + dx * px if dx > 0 else X + dx * px - w
+            box = (left, Y + dy * px, left + w, Y + dy * px + h)
+            if not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3]
+                       for b in placed):
+                break
+        placed.append(box)
+        ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
+                    fontsize=fontsize, color=color, ha="left" if dx > 0 else "right", va="bottom")
+
+
+def tidy_log_axes(*axes) -> None:
+    """Readable log axes: over less than three decades, ticks at 1, 2 and 5 times the powers
+    of ten labelled plainly (``0.2``, ``0.5``, ``1``); over more, the decades only. Minor
+    ticks stay, unlabelled."""
+    import math
+
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    for ax in axes:
+        for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+            if axis.get_scale() != "log" or min(lim) <= 0:
+                continue
+            if math.log10(max(lim) / min(lim)) < 3:
+                axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            axis.set_minor_formatter(NullFormatter())
+
+
 def progress_bar(total: int, enabled: bool):
     """A tqdm bar on stderr (time remaining), disabled unless ``enabled``."""
     from tqdm.auto import tqdm

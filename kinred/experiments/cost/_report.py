@@ -8,6 +8,14 @@ from ...errors import InvalidInput
 from ._registry import REGISTRY
 
 
+def _tidy(fig):
+    """Decade labels only on the log axes of a study's figure (no crowded minor labels)."""
+    from ._base import tidy_log_axes
+
+    tidy_log_axes(*fig.axes)
+    return fig
+
+
 def write_outputs(result, out_dir) -> Path:
     """Write the result folder of ``result``.
 
@@ -53,11 +61,13 @@ def write_outputs(result, out_dir) -> Path:
     for name, study in studies:
         st = result.studies[name]
         setting = ", ".join(f"{k}={v}" for k, v in st.get("setting", {}).items())
+        loaded = " (loaded from the previous run)" if result.stages.get(name) == "loaded" else ""
         sec = rep.section(study.title, [setting, f"wall time of this study: "
-                                                 f"{result.study_times.get(name, 0.0):.1f} s"])
+                                                 f"{result.study_times.get(name, 0.0):.1f} s"
+                                                 f"{loaded}"])
         sec.tables.append(tables[name])
         drawn = draw_figure(f"cost_{name}.png", study.title,
-                            lambda plt, study=study, st=st: study.figure(st, plt))
+                            lambda plt, study=study, st=st: _tidy(study.figure(st, plt)))
         if drawn.png is not None:
             folder.write_bytes(drawn.name, drawn.png)
         sec.add_drawn(drawn)

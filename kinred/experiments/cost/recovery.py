@@ -19,7 +19,7 @@ import numpy as np
 
 from ..._validate import as_float, as_int
 from ...errors import InvalidInput
-from ._base import Study, StudyConfig, clock, draw_front
+from ._base import Study, StudyConfig, clock, draw_front, label_points
 
 
 @dataclass(frozen=True)
@@ -147,18 +147,17 @@ class RecoveryStudy(Study):
     def figure(self, result: dict, plt):
         r = result
         fig, ax = plt.subplots(figsize=(7.5, 5))
-        ts, es = [], []
+        ts, es, labels = [], [], []
         for tol in dict.fromkeys(x["tol"] for x in r["rows"]):
             rs = [x for x in r["rows"] if x["tol"] == tol]
             t, e = [x["time_s"] for x in rs], [x["error"] for x in rs]
             ts += t
             es += e
-            ax.loglog(t, e, "o-", label=f"tol = {tol:g}")
-        for x in r["rows"]:
-            if x["tol"] == r["rows"][0]["tol"]:
-                ax.annotate(f"L={x['L']}", (x["time_s"], x["error"]), fontsize=7, xytext=(3, 3),
-                            textcoords="offset points")
+            line, = ax.loglog(t, e, "o-", label=f"tol = {tol:g}")
+            labels.append((t, e, [f"L={x['L']}" for x in rs], line.get_color()))
         draw_front(ax, ts, es)
+        for t, e, texts, color in labels:
+            label_points(ax, t, e, texts, color=color)
         ax.set_xlabel("wall time: L projected simulations + batched basis pursuit [s]")
         ax.set_ylabel("relative recovery error of v(t)")
         ax.set_title(f"recovery: L projections into R^{r['setting']['k']}, d = {r['setting']['d']}")

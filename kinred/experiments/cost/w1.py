@@ -108,22 +108,30 @@ class W1Study(Study):
 
 
 def _draw_bracket(ax, w: dict) -> None:
-    """Right panel: certified width and error of the bracket against time."""
-    rs = [x for x in w["rows"] if x["method"] == "bracket"]
-    ax.loglog([x["time_s"] for x in rs], [x["rel_width"] for x in rs], "^-",
-              label="bracket: certified (upper-lower)/W1")
-    ax.loglog([x["time_s"] for x in rs], [max(x["rel_error"], 1e-16) for x in rs], "v:",
-              label="bracket: |value - W1|/W1")
-    for x in rs:
-        ax.annotate(f"N={x['N']}", (x["time_s"], x["rel_width"]), fontsize=7, xytext=(3, 3),
-                    textcoords="offset points")
-    for x in w["rows"]:
-        if x["method"] == "exact":
-            ax.axvline(x["time_s"], color="0.8", lw=0.8)
-    ax.set_xlabel("wall time [s] (grey lines: exact at each N)")
-    ax.set_ylabel("relative accuracy")
-    ax.set_title("bracket accuracy vs time (exact methods: 0 error)")
-    ax.legend(fontsize=8)
+    """Right panel: the certified bracket [lower, upper] as a band around the exact W1, per N
+    (everything divided by the exact value, so the band's height is the relative width)."""
+    exact = {x["N"]: x["value"] for x in w["rows"] if x["method"] == "exact"}
+    rs = sorted((x for x in w["rows"] if x["method"] == "bracket" and exact.get(x["N"])),
+                key=lambda x: x["N"])
+    n = [x["N"] for x in rs]
+    lo = [x["lower"] / exact[x["N"]] for x in rs]
+    hi = [x["upper"] / exact[x["N"]] for x in rs]
+    ax.fill_between(n, lo, hi, color="C2", alpha=0.25, lw=0,
+                    label="certified bracket [lower, upper] (eq. (4.5))")
+    ax.plot(n, lo, "-", color="C2", lw=0.8)
+    ax.plot(n, hi, "-", color="C2", lw=0.8)
+    ax.plot(n, [x["value"] / exact[x["N"]] for x in rs], "^", color="C2",
+            label="bracket's returned value")
+    ax.axhline(1.0, color="k", lw=1, label="exact W1 (exact, exact-lazy)")
+    ax.set_xscale("log")
+    ax.set_xticks(n, [str(v) for v in n])
+    ax.minorticks_off()
+    pad = max([abs(v - 1.0) for v in lo + hi] + [0.01])
+    ax.set_ylim(1.0 - 1.3 * pad, 1.0 + 1.3 * pad)
+    ax.set_xlabel("atoms N = M")
+    ax.set_ylabel("W1 / exact W1")
+    ax.set_title("certified bracket around the exact value")
+    ax.legend(fontsize=8, loc="upper left")
 
 
 STUDY = W1Study()
