@@ -85,9 +85,8 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> int:
     try:
         code = args._run(args)
-    except KinredError as exc:  # one line, whatever the message holds (a path with a newline)
-        text = str(exc).replace("\r", "\\r").replace("\n", "\\n")
-        print(f"kinred: error: {type(exc).__name__}: {text}", file=sys.stderr)
+    except KinredError as exc:
+        print(f"kinred: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("kinred: interrupted; finished results are on disk (rerun with --resume to "
