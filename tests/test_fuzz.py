@@ -212,6 +212,15 @@ BAD = st.one_of(
 @example(case=("basis_pursuit", "polish"), bad=np.zeros(2))  # ValueError (truth of array)
 @example(case=("run_ensemble", "progress"), bad=np.zeros(2))  # ValueError (truth of array)
 @example(case=("run_ensemble", "resume"), bad=np.zeros(2))   # ValueError (truth of array)
+@example(case=("Alignment", "on"), bad=None)                  # named 'source'
+@example(case=("SaveAt", "observables"), bad=False)          # TypeError: bool not iterable
+@example(case=("Scene", "effects"), bad=np.array(0.0))       # TypeError: 0-d iteration
+@example(case=("Scene", "weights"), bad=[[1.0], [1.0, 2.0]])  # ValueError: ragged
+@example(case=("run_ensemble", "members"), bad=np.array(0.0))  # TypeError: 0-d iteration
+@example(case=("basis_pursuit", "eta"), bad=[[1.0], [1.0, 2.0]])  # ValueError: ragged
+@example(case=("Noise", "matrix"), bad=np.zeros((0, 0)))     # ValueError: broadcast at run
+@example(case=("Noise", "sigma"), bad=1e308)                 # OverflowError: sigma ** 2
+@example(case=("simulate", "t_span"), bad=(-1e-05, 0.05))    # named '(t1 - t0)/dt' only
 def test_bad_arguments_raise_a_named_kinred_error(case, bad):
     entry, arg = case
     fn, kw = ENTRIES[entry]
