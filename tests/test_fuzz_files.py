@@ -108,7 +108,7 @@ def _scene_checks(data, source="<scene>"):
     cfg.times()
 
 
-@settings(max_examples=600, **FUZZ)
+@settings(max_examples=900, **FUZZ)
 @given(case=mutated(SCENE_DATA, python_keys=True))
 # lift_to = 1e9: MemoryError in kinred.kinetic.lift (now TooLarge naming initial.lift_to)
 @example(case=({**SMALL_SCENE, "dynamics": {**SMALL_SCENE["dynamics"], "d": 10**9},
@@ -126,7 +126,7 @@ def test_mutated_scene_tables_load_or_name_the_key(case):
             check_file_error(exc, "<scene>", keys)
 
 
-@settings(max_examples=400, **FUZZ)
+@settings(max_examples=700, **FUZZ)
 @given(case=mutated(MEASURE_DATA, python_keys=True))
 # unknown keys printed raw: the message broke into two lines; int keys broke sorted()
 @example(case=({"coordinate": [{"dist": "uniform", "a\nb": 1}]}, ["coordinate", "a\nb"]))
@@ -177,7 +177,7 @@ def damaged(draw):
     return bytes(b)
 
 
-@settings(max_examples=250, **FUZZ)
+@settings(max_examples=350, **FUZZ)
 @given(content=st.one_of(damaged(), st.sampled_from(BOMBS), st.binary(max_size=64)))
 def test_damaged_bytes_load_or_raise_one_line(tmp_path_factory, content):
     path = tmp_path_factory.mktemp("bytes") / "file.toml"
