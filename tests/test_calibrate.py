@@ -148,8 +148,8 @@ def test_todays_default_is_always_a_candidate():
     assert (cands[-1].normalize, cands[-1].G, cands[-1].data_seed) == (normalize, G, seed)
     in_grid = cal.candidates(CalibrationConfig())
     assert sum(c.default for c in in_grid) == 1 and len(in_grid) == 18
-    # at N = 200 the default keeps its mean-field strength: G = 0.8 * 1000 / 200
-    assert cal.default_candidate(200).G == 4.0 == table1.Table1Config.quick().G
+    # at N = 200 the default keeps its mean-field strength: G = 1.0 * 1000 / 200
+    assert cal.default_candidate(200).G == 5.0 == table1.Table1Config.quick().G
 
 
 def test_mean_field_strength_round_trips():

@@ -49,7 +49,7 @@ def test_quick_table1_reproduces_the_papers_pattern(quick_run):
 
 def test_quick_table1_writes_its_result_folder(quick_run):
     out, res = quick_run
-    assert res["coupling"] == "normalize='sum', G=4.0" and res["precision"] == "mixed"
+    assert res["coupling"] == "normalize='sum', G=5.0" and res["precision"] == "mixed"
     assert res["paper"]["1.62"]["25"] == {"pos": 1, "neg": 1, "n/a": 18}
     html = (out / "report.html").read_text()
     assert validate_report_html(html) == 3
