@@ -37,6 +37,7 @@ number of workers, and an interrupted run resumes from its results store.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,9 +179,14 @@ def initial_data(N: int, d: int, data_seed: int):
 def member(params: dict, seed) -> dict:
     """One simulation of the study: the original system (``k = 0``) or a projected one.
 
-    Top-level (picklable) member function for :func:`kinred.ensemble.run_ensemble`.
+    Top-level (picklable) member function for :func:`kinred.ensemble.run_ensemble`. A run whose
+    forward Euler step blows up (:class:`~kinred.errors.SimulationDiverged`: strong couplings
+    in k = 2, where projected agents crowd) has Γ = inf at every saved time and its time in
+    ``diverged_at`` (NaN otherwise): it counts as "no flocking", the paper's rule on the Γ(30)
+    its run would reach (as in :mod:`kinred.experiments.calibrate_table1`).
     """
     from ..dynamics import Alignment, CuckerSmale, Scene
+    from ..errors import SimulationDiverged
     from ..integrate import SaveAt, simulate
     from ..projection import jl_matrix
 
@@ -192,14 +198,21 @@ def member(params: dict, seed) -> dict:
         scene = scene.project(M)
         x0, v0 = M.apply(x0), M.apply(v0)
     t_end = params["steps"] * params["dt"]
-    traj = simulate(scene, x0, v0, t_span=(0.0, t_end), dt=params["dt"], method="euler",
-                    save=SaveAt(every=params["record_every"], observables=("gamma",)))
-    return {"t": traj.t, "gamma": traj.observables["gamma"]}
+    try:
+        traj = simulate(scene, x0, v0, t_span=(0.0, t_end), dt=params["dt"], method="euler",
+                        save=SaveAt(every=params["record_every"], observables=("gamma",)))
+    except SimulationDiverged as exc:
+        n_saved = params["steps"] // params["record_every"] + 1
+        t = np.arange(n_saved) * (params["record_every"] * params["dt"])
+        return {"t": t, "gamma": np.full(n_saved, np.inf), "diverged_at": float(exc.t)}
+    return {"t": traj.t, "gamma": traj.observables["gamma"], "diverged_at": math.nan}
 
 
 def _verdict(g: float, yes_below: float, no_above: float) -> str:
     from ..observables import flocking_verdict
 
+    if math.isinf(g):           # a diverged run (member): the Γ(30) it would reach is > no_above
+        return "neg"
     return flocking_verdict(g, yes_below=yes_below, no_above=no_above)
 
 
