@@ -1,5 +1,6 @@
 """`kinred paper calibrate`: scoring against the paper's Table 1, the study end to end, resume."""
 
+import ast
 import json
 import math
 from pathlib import Path
@@ -23,6 +24,13 @@ README_TABLE1 = {
     1.7: {200: (0, 1, 0), 150: (0, 20, 0), 100: (0, 20, 0), 50: (0, 20, 0), 25: (0, 20, 0),
           10: (0, 20, 0), 5: (0, 20, 0), 2: (0, 20, 0)},
 }
+
+#: Today's default candidate: mean-field strength K0 = N·G at the paper's N, data seed S0
+#: (table1.DEFAULT_COUPLING, chosen by the calibration; the tests follow it).
+K0 = table1.mean_field_strength(table1.DEFAULT_COUPLING[0], table1.DEFAULT_COUPLING[1],
+                                table1.PAPER_N)
+S0 = table1.DEFAULT_COUPLING[2]
+S1 = 1 if S0 != 1 else 0                  # another data seed
 
 #: A tiny study (seconds): N = 20 agents, 100 steps, two rows of k, two projections each.
 TINY = dict(N=20, steps=100, ks=(25, 10), n_projections=2, betas=(1.5, 1.7),
@@ -108,20 +116,20 @@ def _one_miss():
 
 
 def test_recommendation_adopts_a_convention_that_beats_todays_on_average():
-    res = _fake_result({(800.0, 0): README_TABLE1, (800.0, 1): README_TABLE1,
-                        (900.0, 0): _one_miss(), (900.0, 1): PAPER_TABLE1},
-                       strengths=(800.0, 900.0), data_seeds=(0, 1))
+    res = _fake_result({(K0, S0): README_TABLE1, (K0, S1): README_TABLE1,
+                        (900.0, S0): _one_miss(), (900.0, S1): PAPER_TABLE1},
+                       strengths=(K0, 900.0), data_seeds=(S0, S1))
     conv = res.conventions()
     assert [(e["strength"], e["mean_matches"], e["min_matches"], e["max_matches"]) for e in conv] == \
-        [(900.0, 23.5, 23, 24), (800.0, 17.0, 17, 17)]
+        [(900.0, 23.5, 23, 24), (K0, 17.0, 17, 17)]
     assert conv[1]["default"] and conv[0]["mean_l1"] == pytest.approx(1.0)
     rec = res.recommendation()
-    assert rec["adopt"] and (rec["strength"], rec["data_seed"], rec["matches"]) == (900.0, 1, 24)
-    assert rec["table1_line"] == 'DEFAULT_COUPLING = ("sum", 0.9, 1)'
+    assert rec["adopt"] and (rec["strength"], rec["data_seed"], rec["matches"]) == (900.0, S1, 24)
+    assert rec["table1_line"] == f'DEFAULT_COUPLING = ("sum", 0.9, {S1})'
     assert (rec["default_matches"], rec["default_mean_matches"]) == (17, 17.0)
-    assert [res.candidates[i].data_seed for i in res.ranking()[:2]] == [1, 0]
+    assert [res.candidates[i].data_seed for i in res.ranking()[:2]] == [S1, S0]
     text = res.to_text()
-    assert "Recommendation: adopt sum K=900 data_seed 1 (24/24" in text
+    assert f"Recommendation: adopt sum K=900 data_seed {S1} (24/24" in text
     # the paper's row of the per-cell verdicts, in the paper's layout
     paper_row = next(line for line in text.splitlines() if line.startswith("paper "))
     assert paper_row.split()[1:] == (["P"] * 6 + ["U", "U", "|"] + ["P"] * 4 + ["U", "N", "N", "N", "|"]
@@ -129,13 +137,14 @@ def test_recommendation_adopts_a_convention_that_beats_todays_on_average():
 
 
 def test_recommendation_keeps_todays_default_on_a_tie():
-    res = _fake_result({(800.0, 0): README_TABLE1, (900.0, 0): README_TABLE1},
-                       strengths=(900.0, 800.0), data_seeds=(0,))
+    res = _fake_result({(K0, S0): README_TABLE1, (900.0, S0): README_TABLE1},
+                       strengths=(900.0, K0), data_seeds=(S0,))
     rec = res.recommendation()
-    assert not rec["adopt"] and (rec["strength"], rec["data_seed"]) == (800.0, 0)
-    assert rec["table1_line"] == 'DEFAULT_COUPLING = ("sum", 0.8, 0)'
-    # ... which is the line in table1.py today
-    assert rec["table1_line"] in Path(table1.__file__).read_text()
+    assert not rec["adopt"] and (rec["strength"], rec["data_seed"]) == (K0, S0)
+    # ... which is the line in table1.py today (its numbers; G printed as %g)
+    assert rec["table1_line"].startswith("DEFAULT_COUPLING = (")
+    assert ast.literal_eval(rec["table1_line"].split("=", 1)[1].strip()) == table1.DEFAULT_COUPLING
+    assert "DEFAULT_COUPLING = (" in Path(table1.__file__).read_text()
     assert "keep today's default" in res.to_text()
 
 
@@ -164,7 +173,7 @@ def test_mean_field_strength_round_trips():
 def test_estimate_reproduces_table1s_measured_time_and_the_full_grid_fits_an_hour():
     # the Table 1 study as a calibration (20 projections, today's default only): the model is
     # fitted on that run's 1039 s on 2 cores
-    as_table1 = CalibrationConfig(n_projections=20, strengths=(800.0,), data_seeds=(0,))
+    as_table1 = CalibrationConfig(n_projections=20, strengths=(K0,), data_seeds=(S0,))
     assert len(cal.candidates(as_table1)) == 1
     assert cal.estimate_seconds(as_table1, 2) == pytest.approx(1039.0, rel=1e-12)
     assert 40 * 60 < cal.estimate_seconds(CalibrationConfig(), 2) <= 60 * 60
@@ -228,7 +237,7 @@ def test_smoke_run_writes_its_outputs(tmp_path):
         assert c["score"]["n_cells"] == 6
     assert json.loads((tmp_path / "summary.json").read_text())["recommendation"] == data["recommendation"]
     text = (tmp_path / "calibration.txt").read_text()
-    assert text == res.to_text() and "sum K=800 (G=40) seed 0 *" in text
+    assert text == res.to_text() and f"sum K={K0:g} (G={K0 / 20:g}) seed {S0} *" in text
 
 
 def test_todays_candidate_reruns_table1s_first_projections_exactly():
@@ -236,8 +245,9 @@ def test_todays_candidate_reruns_table1s_first_projections_exactly():
     cfg = CalibrationConfig(**TINY)
     res = cal.run(cfg, executor="serial", progress=False)
     d = res.default_index
-    t1 = table1.run(table1.Table1Config(N=20, steps=100, ks=(25, 10), betas=(1.5, 1.7), G=40.0,
-                                        record_every=50), executor="serial", progress=False)
+    t1 = table1.run(table1.Table1Config(N=20, steps=100, ks=(25, 10), betas=(1.5, 1.7),
+                                        G=K0 / 20, data_seed=S0, record_every=50),
+                    executor="serial", progress=False)
     for b in (1.5, 1.7):
         assert res.gamma_final[d][b][200] == [float(t1.gamma[b][200][0, -1])]
         for k in (25, 10):
@@ -257,10 +267,10 @@ def test_sum_and_mean_at_the_same_strength_are_the_same_system():
 
 
 def test_a_diverged_run_counts_as_no_flocking(tmp_path):
-    # N = 20 with K = 800 (G = 40): in k = 2 the projected agents crowd and Euler's h = 0.02
-    # is unstable (the member would raise SimulationDiverged)
+    # N = 20 with today's K (G = K/20): in k = 2 the projected agents crowd and Euler's
+    # h = 0.02 is unstable (the member would raise SimulationDiverged)
     cfg = CalibrationConfig(N=20, steps=100, ks=(2,), n_projections=1, betas=(1.5,),
-                            strengths=(800.0,), data_seeds=(0,))
+                            strengths=(K0,), data_seeds=(S0,))
     res = cal.run(cfg, out_dir=tmp_path, executor="serial", progress=False)
     assert res.n_diverged(0) == 1
     assert res.gamma_final[0][1.5][2] == [math.inf] and res.counts[0][1.5][2] == (0, 1, 0)
