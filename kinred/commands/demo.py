@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="hide the progress bar (shown on stderr when it is a terminal)")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes (seconds)")
     parser.add_argument("--dim", type=int, help="dimension d (default 100)")
-    parser.add_argument("--atoms", type=int, help="atom budget N (default 400; reference 3N)")
+    parser.add_argument("--atoms", type=int, help="atom budget N (default 600; reference 3N)")
     parser.add_argument("--k", type=int, nargs="+", help="target dimensions (default 2 5 10 25)")
 
 

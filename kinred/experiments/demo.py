@@ -38,7 +38,7 @@ DEMO_SCENE = {
         "velocities": {"coordinate": [{"dist": "uniform", "params": {"loc": -0.8, "scale": 1.6},
                                        "repeat": 100, "decay": 0.5}]},
     },
-    "quantize": {"atoms": 400, "reference_atoms": 1200},
+    "quantize": {"atoms": 600, "reference_atoms": 1800},
     "projection": {"k": [2, 5, 10, 25], "kind": "gaussian", "seed": 2024},
     "integrate": {"method": "euler", "dt": 0.05, "t_final": 20.0, "save_every": 25},
     "output": {"yes_below": 1e-10, "no_above": 1e-3},
