@@ -333,7 +333,7 @@ def report(result, figures):
 
     cfg = result.config
     rep = Report(f"kinred run: {cfg.title}",
-                 subtitle=(cfg.description + " " if cfg.description else "") +
+                 subtitle=(cfg.description.rstrip(".") + ". " if cfg.description else "") +
                  f"d = {cfg.d}, N = {result.n_atoms} atoms (ε = {result.eps:.4g}, a-priori "
                  f"bound of W₁(μ₀, μ₀ᴺ)), k ∈ {list(cfg.ks)} ({cfg.kind}), {cfg.method} dt = "
                  f"{cfg.dt:g}, T = {cfg.t_final:g}" + (" [smoke sizes]" if cfg.smoke else "")
