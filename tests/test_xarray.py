@@ -4,14 +4,13 @@ import sys
 
 import numpy as np
 import pytest
+import xarray as xr  # in the test extra: a missing xarray fails, never skips
 
 import kinred
 from kinred.dynamics import Aggregation, Alignment, CuckerSmale, Scene
 from kinred.dynamics.kernels import Quadratic
 from kinred.errors import KinredError, MissingDependency
 from kinred.integrate import SaveAt, simulate
-
-xr = pytest.importorskip("xarray")
 
 
 def _weighted_run():
