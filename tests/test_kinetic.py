@@ -117,6 +117,15 @@ def test_reference_estimate_and_stability_constant():
     C = np.maximum(tb.C, tbr.C)
     assert np.all(est.w1_quantization <= C * est.w1_quantization[0] * (1 + 1e-9))
     assert est.w1_quantization[0] <= sol.eps + ref.eps
+    # W1(μᴺ, μᴺ') does not depend on M: another projection reuses it, the rest is recomputed
+    M5 = jl_matrix(5, d, seed=1)
+    fresh = reference_estimate(sol, ref, reduce(ref, M=M5))
+    reused = reference_estimate(sol, ref, reduce(ref, M=M5), quantization=est.w1_quantization)
+    np.testing.assert_array_equal(reused.w1_quantization, fresh.w1_quantization)
+    np.testing.assert_array_equal(reused.w1_reference, fresh.w1_reference)
+    assert not np.array_equal(fresh.w1_reference, est.w1_reference)
+    with pytest.raises(InvalidInput, match="quantization must hold"):
+        reference_estimate(sol, ref, reduce(ref, M=M5), quantization=est.w1_quantization[:-1])
 
 
 def test_solve_validation():

@@ -37,7 +37,8 @@ from pathlib import Path
 from ..errors import InvalidInput
 from ..io import atomic_write_json
 
-__all__ = ["RESULTS", "MARKER", "Layout", "default_out", "prepare", "record", "LAYOUTS"]
+__all__ = ["RESULTS", "MARKER", "Layout", "default_out", "prepare", "record", "LAYOUTS",
+           "add_scene_arguments"]
 
 #: Parent of every default result folder.
 RESULTS = Path("results")
@@ -209,3 +210,19 @@ def record(out, layout: Layout) -> None:
     out = Path(out)
     files = [f for f in _files(out) if f != MARKER and not f.startswith(("stages/", "store/"))]
     atomic_write_json(out / MARKER, {"command": layout.command, "files": files})
+
+
+def add_scene_arguments(parser, command: str) -> None:
+    """The arguments every scene-file command shares (``kinred run``, ``kinred certify``):
+    ``SCENE.toml``, ``--out`` (default ``results/<command>-<scene name>``), ``--resume``,
+    ``--smoke`` and ``--no-progress``."""
+    parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scene-file.md)")
+    parser.add_argument("--out", metavar="DIR",
+                        help=f"result folder (default results/{command}-<scene name>; a previous "
+                             f"`kinred {command}` there is replaced unless --resume)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue an interrupted run in --out (finished stages are loaded)")
+    parser.add_argument("--smoke", action="store_true",
+                        help="tiny sizes from the scene's [smoke] table (seconds)")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="hide the progress bar (shown on stderr when it is a terminal)")

@@ -41,13 +41,7 @@ _NORMS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scene-file.md)")
-    parser.add_argument("--out", metavar="DIR",
-                        help="result folder (default results/certify-<scene name>)")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue an interrupted run in --out (finished stages are loaded)")
-    parser.add_argument("--smoke", action="store_true",
-                        help="tiny sizes from the scene's [smoke] table (seconds)")
+    _output.add_scene_arguments(parser, "certify")
     parser.add_argument("--norm", choices=("rms", "max", "both"),
                         help="norms to print (default: the scene's [certify] norm, else both)")
 
@@ -109,7 +103,8 @@ def run(args) -> int:
     out = Path(args.out) if args.out else _output.default_out(
         "certify", scene=Path(args.scene).stem, size="smoke" if args.smoke else None)
     _output.prepare(out, layout, resume=args.resume)
-    result = kinetic_run.run(cfg, out_dir=out, resume=args.resume)
+    result = kinetic_run.run(cfg, out_dir=out, resume=args.resume,
+                             progress=False if args.no_progress else None)
     _output.record(out, layout)
     print(f"kinred certify: {cfg.title}: d = {cfg.d}, N = {result.n_atoms} atoms, "
           f"{cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}, k ∈ {list(cfg.ks)}")

@@ -27,16 +27,7 @@ HELP = "run a scene file: kinetic and reduced solutions, W1 vs Theorem 4.3's bou
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scene-file.md)")
-    parser.add_argument("--out", metavar="DIR",
-                        help="result folder (default results/run-<scene name>; a previous "
-                             "`kinred run` there is replaced unless --resume)")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue an interrupted run in --out (finished stages are loaded)")
-    parser.add_argument("--smoke", action="store_true",
-                        help="tiny sizes from the scene's [smoke] table (seconds)")
-    parser.add_argument("--no-progress", action="store_true",
-                        help="hide the progress bar (shown on stderr when it is a terminal)")
+    _output.add_scene_arguments(parser, "run")
 
 
 def run(args) -> int:

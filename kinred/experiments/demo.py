@@ -23,6 +23,7 @@ from .._validate import as_int
 from ..errors import InvalidInput
 from .. import scenefile
 from . import kinetic_run
+from .kinetic_certify import worst_ratio
 
 __all__ = ["DemoConfig", "DEMO_SCENE", "run", "scene_config"]
 
@@ -158,11 +159,7 @@ def story(result: kinetic_run.RunResult) -> list[str]:
     for k, r in per_k.items():
         w = float(r["w1"][-1])
         cert = float(r["cert_w1"][-1]) if "cert_w1" in r else float("nan")
-        sel = result.t >= 1.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = r["cert_w1"][sel] / r["w1"][sel] if "cert_w1" in r else np.array([np.nan])
-        ratio = ratio[np.isfinite(ratio)]
-        worst = float(np.max(ratio)) if ratio.size else float("nan")
+        worst = worst_ratio(r["cert_w1"], r["w1"], result.t) if "cert_w1" in r else float("nan")
         apri = float(r["bound"][-1])
         vac = bool(np.asarray(r.get("vacuous", [False]))[-1])
         row = [str(k), _g(w)] + ([_g(r["w1_reference"][-1])] if ref else [])
@@ -194,11 +191,7 @@ def _conclusions(result, ref: bool) -> list[str]:
     certified = [k for k in ks if "cert_w1" in per_k[k] and np.all(np.isfinite(per_k[k]["cert_w1"]))]
     if certified:
         valid = all(bool(np.all(per_k[k]["w1"] <= per_k[k]["cert_w1"])) for k in certified)
-        sel = result.t >= 1.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rat = np.concatenate([per_k[k]["cert_w1"][sel] / per_k[k]["w1"][sel] for k in certified])
-        rat = rat[np.isfinite(rat)]
-        worst = float(rat.max()) if rat.size else float("nan")
+        worst = max(worst_ratio(per_k[k]["cert_w1"], per_k[k]["w1"], result.t) for k in certified)
         vac = all(bool(np.all(per_k[k].get("vacuous", [False]))) for k in ks)
         line2 = (f"  2. Certified: the a-posteriori bound {'holds' if valid else 'FAILS'} at every "
                  f"saved time, within {worst:.2f}× of the measured W1\n     (t ≥ 1)"

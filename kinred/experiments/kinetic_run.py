@@ -238,7 +238,7 @@ def _solution(stages, cfg: Config, name: str, atoms, eps):
     return a, _sol_from_arrays(a, cfg, seed)
 
 
-def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter):
+def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=None):
     """Stage ``k{k}``: the reduced run, W1, Theorem 4.3's bound, the certificate, observables."""
     from ..kinetic import compare, milling_index, reduce, reference_estimate, theorem_bound
     from ..observables import gamma
@@ -262,7 +262,7 @@ def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter):
                                    term_quant=tb.term_quant, bound=tb.bound, diameter=diameter))
     if ref is not None:
         rred = reduce(ref, M=M)
-        est = reference_estimate(sol, ref, rred)
+        est = reference_estimate(sol, ref, rred, quantization=quantization)
         out["w1_reference"] = est.w1_reference
         out["w1_quantization"] = est.w1_quantization
     out["wall_time"] = time.perf_counter() - t0
@@ -309,11 +309,13 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
         r, ref = _solution(stages, cfg, "reference", cfg.reference_atoms, None)
         bar.update(1)
     per_k = {}
+    quant = None              # W1(μᴺ(t), μᴺ′(t)) on R^2d: the same for every k, computed once
     for k in cfg.ks:
         bar.set_postfix_str(f"k{k}")
         per_k[k] = stages.get_or_compute(
-            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter),
+            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter, quant),
             load=_loader(_K_KEYS + (_REF_KEYS if ref is not None else ())))
+        quant = per_k[k].get("w1_quantization", quant)
         bar.update(1)
     bar.close()
     high = {"gamma": a["gamma"], "milling": a["milling"], "diameter": diameter,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._rng import member_seed
-from .._validate import as_int
+from .._validate import as_array, as_int
 from ..errors import InvalidInput, TooLarge
 from ._solution import KineticSolution, ReducedSolution
 
@@ -192,17 +192,30 @@ class ReferenceEstimate:
 
 
 def reference_estimate(solution: KineticSolution, reference: KineticSolution,
-                       reference_reduced: ReducedSolution) -> ReferenceEstimate:
+                       reference_reduced: ReducedSolution, *,
+                       quantization=None) -> ReferenceEstimate:
     """Estimate ``W1(μ_M(t), ν(t))`` by a finer reference, and ``W1(μᴺ(t), μᴺ′(t))``.
 
-    ``reference`` must be saved at the same times as ``solution``.
+    ``reference`` must be saved at the same times as ``solution``. ``W1(μᴺ(t), μᴺ′(t))`` does
+    not depend on the projection: pass ``quantization`` (its ``(T,)`` values from an earlier
+    call with the same two solutions, computed exactly) to reuse it instead of solving its ``T``
+    transport problems on ``ℝ²ᵈ`` again.
     """
     if not np.allclose(solution.t, reference.t):
         raise InvalidInput("solution and reference must share their save times")
     c = compare(reference, reference_reduced)
     T = len(solution.t)
-    q = np.empty(T)
     exact = bool(c.exact.all())
+    if quantization is not None:
+        q = as_array(quantization, "quantization", ndim=1)
+        if q.shape != (T,) or not np.all(q >= 0):
+            raise InvalidInput(f"quantization must hold W1(μᴺ(t), μᴺ′(t)) >= 0 at the {T} saved "
+                               f"times, got shape {q.shape}")
+        return ReferenceEstimate(t=np.asarray(solution.t, float), w1_reference=c.w1,
+                                 w1_quantization=q.copy(), n_atoms=solution.n_atoms,
+                                 n_atoms_reference=reference.n_atoms,
+                                 eps_reference=reference.eps, exact=exact)
+    q = np.empty(T)
     for i in range(T):
         r = _w1_atoms(np.concatenate([solution.x[i], solution.v[i]], axis=1),
                       np.concatenate([reference.x[i], reference.v[i]], axis=1),
