@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test bench docs clean
+.PHONY: demo test bench docs clean chromium
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -26,8 +26,22 @@ $(VENV)/.installed-docs: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed-base
 	$(BIN)/kinred demo
 
-test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest
+# The suite runs on every core (pytest-xdist) and lists its slowest tests. The report's browser
+# test needs Debian's chromium: installed here with apt when run as root, otherwise one line
+# says the command to run (kinred.report._browser.find_chromium is the one place that looks).
+test: $(VENV)/.installed-test chromium
+	$(BIN)/python -m pytest -n auto --durations=15
+
+chromium: $(VENV)/.installed-base
+	@$(BIN)/python -c "from kinred.report._browser import find_chromium as f; f()" 2>/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "make test: installing chromium with apt-get (for tests/test_report_browser.py)"; \
+	    apt-get update -qq >/dev/null && \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	  else \
+	    echo "make test: tests/test_report_browser.py needs Chromium; install it with: sudo apt-get install chromium"; \
+	    exit 2; \
+	  fi; }
 
 # HTML into docs/_build/html (git-ignored); any warning fails the build. The gallery pages
 # are regenerated in docs/auto_examples (git-ignored) by running every example.

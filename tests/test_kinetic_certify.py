@@ -27,7 +27,7 @@ KINDS = {"measured", "certified bound", "a-priori bound", "estimate"}
 
 
 def demo_like(d=20, atoms=60, ks=(2, 5), t_final=4.0, reference=None, **certify):
-    """The demo's scene (Cucker–Smale G = 2, β = 0.5, widths 1.6·0.5^j) at small sizes."""
+    """The demo's scene (Cucker–Smale G = 2, β = 0.5, widths 1.6·0.5ʲ) at small sizes."""
     sc = copy.deepcopy(demo.DEMO_SCENE)
     sc.pop("smoke")
     sc.pop("certify")

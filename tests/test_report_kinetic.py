@@ -223,8 +223,10 @@ def test_report_html_figures_first_tables_folded(small):
     res = _certified(small, diameter=1e-6)
     html = kr.report(res, kr.figures(res)).to_html()
     assert html.index("<figure>") < html.index("<table")
-    assert html.count("<details>") == len(small.config.ks)
-    first_details = html.index("<details>")
+    # the a-priori bound is vacuous throughout (diameter 1e-6): its figure is folded too
+    assert html.count("<details>") == len(small.config.ks) + 1
+    assert html.count("<img") == 4 and html.index("<details>") < html.index("<table")
+    first_details = html.index("<details><summary><h2>Numbers over time")
     assert html.count("<table", first_details) == len(small.config.ks)   # per-time: folded
     assert html.count("<table") == len(small.config.ks) + 1               # + the summary
     assert "R^{" not in html and "(vacuous)" in html
@@ -261,3 +263,58 @@ def test_pipeline_certificates_are_drawn_above_the_measured_w1(small_run):
     html = kr.report(res, kr.figures(res)).to_html()
     vac = any(bool(np.asarray(r["vacuous"])[-1]) for r in res.per_k.values())
     assert ("(vacuous)" in html) == vac
+
+
+def test_report_title_subtitle_and_summary_say_each_thing_once(small):
+    """Issue 21 item 16: no "kinred run: kinred demo", d stated once, no "0.5^j", no raw keys."""
+    from kinred.experiments import demo
+    from kinred.experiments.kinetic_certify import CERT_KEYS
+
+    cfg = dataclasses.replace(small.config, title=demo.DEMO_SCENE["title"],
+                              description=demo.DEMO_SCENE["description"])
+    res = _certified(dataclasses.replace(small, config=cfg), diameter=2.0)
+    html = kr.report(res, kr.figures(res)).to_html()
+    h1 = re.search(r"<h1>(.*?)</h1>", html).group(1)
+    assert h1 == demo.DEMO_SCENE["title"] and "kinred run" not in h1
+    subtitle = re.search(r"</h1>\n<p>(.*?)</p>", html).group(1)
+    assert subtitle.count("d = ") == 1 and "^" not in subtitle, subtitle
+    other = dataclasses.replace(small.config, title="my scene")
+    assert "<h1>kinred run: my scene</h1>" in kr.report(
+        dataclasses.replace(small, config=other), []).to_html()
+    summary = html[html.index("<h2>Summary</h2>"):]
+    summary = summary[:summary.index("<h2>", 5)]
+    keys = set(CERT_KEYS) | set(kinetic_run.LABELS)
+    leaked = sorted(k for k in keys if "_" in k and re.search(rf"\b{k}\b", summary))
+    assert not leaked, leaked
+
+
+def test_positions_reduced_panels_share_ranges_and_legend_covers_no_point(small):
+    """Issue 21 item 16: the reduced panels (k ≥ 2) share one range, the legend is outside."""
+    per_k = dict(small.per_k)
+    per_k[3] = {**per_k[2], "y_final": 10.0 * np.asarray(per_k[2]["y_final"]) + 5.0}
+    cfg = dataclasses.replace(small.config, ks=(*small.config.ks, 3))
+    res = dataclasses.replace(small, config=cfg, per_k=per_k)
+    fig = _draw(kr._fig_positions, res)
+    axes = [ax for ax in fig.axes if ax.axison]
+    planar = axes[2:]                                  # the original, k = 1, then k = 2, 3
+    assert len(planar) == 2
+    assert planar[0].get_xlim() == planar[1].get_xlim()
+    assert planar[0].get_ylim() == planar[1].get_ylim()
+    y3 = per_k[3]["y_final"][:, :2]
+    (x0, x1), (y0, y1) = planar[0].get_xlim(), planar[0].get_ylim()
+    assert x0 <= y3[:, 0].min() and y3[:, 0].max() <= x1
+    assert y0 <= y3[:, 1].min() and y3[:, 1].max() <= y1
+    assert all(ax.get_legend() is None for ax in axes) and len(fig.legends) == 1
+    figure_png(fig)
+
+
+def test_apriori_figure_folded_only_when_vacuous_throughout(small):
+    for diameter, folded in ((1e-6, True), (1e6, False)):
+        res = _certified(small, diameter=diameter)
+        assert kr.vacuous_throughout(res) is folded
+        html = kr.report(res, kr.figures(res)).to_html()
+        start = html.index("<h2>Figures</h2>")
+        figs = html[start:html.index("<h2>", start + 5)]
+        assert figs.count("<img") == (3 if folded else 4) and html.count("<img") == 4
+        assert ("<details><summary><h2>A-priori bound" in html) is folded
+    assert not kr.vacuous_throughout(small)            # no diameter: unknown, not folded

@@ -15,7 +15,7 @@ disk), ``cost_<study>.png`` and ``report.html``. ``--resume`` continues an inter
 (finished studies are loaded with the times measured then); without it a previous ``kinred
 cost`` in the folder is replaced (said in one line) and a folder holding other files is
 refused (the rule of :mod:`kinred.commands._output`). The full run takes a few minutes;
-``--quick`` about a minute; ``--smoke`` a few seconds (tests). The headline sentences are
+``--quick`` about 20 s; ``--smoke`` a few seconds (tests). The headline sentences are
 printed at the end, then the result folder.
 """
 
@@ -35,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ..experiments.cost import STUDIES
 
     size = parser.add_mutually_exclusive_group()
-    size.add_argument("--quick", action="store_true", help="reduced sizes, about a minute")
+    size.add_argument("--quick", action="store_true", help="reduced sizes, about 20 s")
     size.add_argument("--smoke", action="store_true", help="tiny sizes, a few seconds (tests)")
     parser.add_argument("--out", metavar="DIR", default=None,
                         help="result folder (default results/cost, results/cost-quick, "

@@ -98,7 +98,7 @@ def method_text(result) -> list:
             + (" and the milling index are" if shows_milling(cfg) else " is")
             + " evaluated on the atoms."]
     if cert:
-        text.append("Certified bound: cert_w1 bounds the measured W₁ from the certificate of "
+        text.append("Certified bound: an upper bound of the measured W₁ from the certificate of "
                     "the particle errors y − Mx, w − Mv, propagated step by step with measured "
                     "quantities (docs/certificates.md).")
     text.append("A-priori bound: the right-hand side of eq. (4.17) as the proof of Theorem 4.3 "

@@ -30,7 +30,7 @@ __all__ = ["DemoConfig", "DEMO_SCENE", "run", "scene_config"]
 #: The built-in scene of the demo (the scene-file format of ``docs/scene-file.md``).
 DEMO_SCENE = {
     "title": "kinred demo: projected vs reduced kinetic solutions",
-    "description": "Cucker–Smale alignment (G = 2, β = 0.5), d = 100, widths 1.6·0.5^j",
+    "description": "Cucker–Smale alignment (G = 2, β = 0.5), widths 1.6·0.5ʲ (j = 1, …, d)",
     "seed": 0,
     "dynamics": {"d": 100, "effect": [{"type": "alignment", "G": 2.0, "beta": 0.5}]},
     "initial": {

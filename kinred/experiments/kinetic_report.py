@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kinetic_tables import k_table, method_text, shows_milling, summary_table
+from ._kinetic_tables import k_table, method_text, shows_milling, summary_table, vacuous
 
 __all__ = ["figures", "report", "shows_milling"]
 
@@ -258,8 +258,32 @@ def _fig_positions(plt, result):
                         label="projected original $M_\\#\\mu^N(T)$")
         point_cloud(ax, y, w, color=colors[k], bins=bins, label=f"reduced $\\nu^N(T)$")
         _cloud_axes(ax, y, "y", f"reduced system at $T$, $k$ = {k}")
-        ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
+    planar = [(ax, mx, y) for ax, (mx, y) in zip(axes[1:], panels.values()) if y.shape[1] > 1]
+    _same_limits([(ax, np.vstack([y] if mx is None else [y, mx])) for ax, mx, y in planar])
+    if len(axes) > 1:   # one legend for the reduced panels, below them: it covers no point
+        handles, labels = axes[1].get_legend_handles_labels()
+        if handles:
+            fig.legend(handles, labels, loc="outside lower center", ncols=len(handles),
+                       fontsize=8, markerscale=1.5)
     return fig
+
+
+def _same_limits(panels) -> None:
+    """Give every ``(ax, points)`` panel the same square x- and y-range (enclosing all of
+    the points), so that the reduced systems for different k compare at a glance."""
+    if not panels:
+        return
+    pts = np.vstack([p[:, :2] for _, p in panels])
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if not len(pts):
+        return
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    mid = (lo + hi) / 2
+    half = 1.06 * max(float(np.max(hi - lo)) / 2, 1e-9 * max(1.0, float(np.max(np.abs(mid)))))
+    for ax, _ in panels:
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlim(mid[0] - half, mid[0] + half)
+        ax.set_ylim(mid[1] - half, mid[1] + half)
 
 
 def _cloud_axes(ax, pts, name, title):
@@ -327,12 +351,22 @@ def figures(result):
             draw_figure("positions_final.png", p_cap, _fig_positions, result)]
 
 
+def vacuous_throughout(result) -> bool:
+    """Whether the a-priori bound is vacuous (above the cloud's diameter) at every saved time
+    for every k: then the report folds its figure, which would show nothing but the region
+    above the diameter."""
+    flags = [vacuous(result, r) for r in result.per_k.values()]
+    return bool(flags) and all(f is not None and f.size and f.all() for f in flags)
+
+
 def report(result, figures):
     """The :class:`kinred.report.Report` of a run: figures, summary, folded per-time tables."""
     from ..report import Report
 
     cfg = result.config
-    rep = Report(f"kinred run: {cfg.title}",
+    # a scene title that already names its command ("kinred demo: ...") is not prefixed again
+    title = cfg.title if cfg.title.startswith("kinred ") else f"kinred run: {cfg.title}"
+    rep = Report(title,
                  subtitle=(cfg.description.rstrip(".") + ". " if cfg.description else "") +
                  f"d = {cfg.d}, N = {result.n_atoms} atoms (ε = {result.eps:.4g}, a-priori "
                  f"bound of W₁(μ₀, μ₀ᴺ)), k ∈ {list(cfg.ks)} ({cfg.kind}), {cfg.method} dt = "
@@ -343,8 +377,14 @@ def report(result, figures):
         f"{cfg.d} velocity coordinates); νᴺ(t) the reduced solution on ℝ²ᵏ started from "
         "M#μ₀ᴺ. Every number is labelled: measured, certified bound, a-priori bound or "
         "estimate. Units are the scene's."])
+    folded = vacuous_throughout(result)
     for drawn in figures:
-        fsec.add_drawn(drawn)
+        if not (folded and drawn.name == "bound.png"):
+            fsec.add_drawn(drawn)
+    if folded:
+        rep.section("A-priori bound (vacuous here: above the cloud's diameter at every saved "
+                    "time, for every k)", folded=True).add_drawn(
+            next(d for d in figures if d.name == "bound.png"))
     s = rep.section("Summary", method_text(result))
     s.tables.append(summary_table(result))
     for k, r in result.per_k.items():

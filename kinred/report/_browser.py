@@ -28,8 +28,8 @@ from ..errors import InvalidInput, KinredError
 __all__ = ["BrowserMissing", "BrowserFailed", "find_chromium", "inspect_page", "screenshot"]
 
 _NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
-INSTALL_HINT = ("install Chromium (Debian/Ubuntu: `apt-get install -y chromium`; .ci/run does "
-                "it) or set CHROMIUM to its path")
+INSTALL_HINT = ("install Chromium (Debian/Ubuntu: `apt-get install -y chromium`; `make test` "
+                "does it when run as root) or set CHROMIUM to its path")
 
 
 class BrowserMissing(KinredError, RuntimeError):
@@ -66,7 +66,11 @@ def _run(args: list, timeout: float) -> subprocess.CompletedProcess:
     with tempfile.TemporaryDirectory(prefix="kinred-chromium-") as profile:
         # --test-type: no "unsupported flag" info bar over the page; compositor stages run
         # before the screenshot is taken (else a loaded machine can leave tiles unpainted)
+        # no background networking: this machine's network is closed, and a headless page
+        # load must not wait on (or be slowed by) refused connections
         cmd = [exe, "--headless", "--disable-gpu", "--no-sandbox", "--test-type",
+               "--disable-background-networking", "--disable-component-update",
+               "--disable-sync", "--disable-quic",
                "--hide-scrollbars", "--no-first-run", "--disable-extensions", "--mute-audio",
                "--run-all-compositor-stages-before-draw", f"--user-data-dir={profile}", *args]
         try:
