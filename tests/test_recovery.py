@@ -424,7 +424,7 @@ def test_support_solve_matches_numpy_and_flags_singular():
 def test_chunked_threads_give_the_same_solutions(monkeypatch):
     """Rows are independent problems: the chunked iteration over two threads gives what one
     thread and what one single chunk give, bit for bit (reproducible whatever the threads)."""
-    import kinred.recovery._solver as solver
+    import kinred.recovery._sweep as sweep
     from kinred._parallel import num_threads
 
     rng = np.random.default_rng(5)
@@ -435,7 +435,7 @@ def test_chunked_threads_give_the_same_solutions(monkeypatch):
         chunked = basis_pursuit(Ms, Y)
     with num_threads(1):
         one_thread = basis_pursuit(Ms, Y)
-    monkeypatch.setattr(solver, "_CHUNK_ROWS", 10**6)
+    monkeypatch.setattr(sweep, "_CHUNK_ROWS", 10**6)
     one_chunk = basis_pursuit(Ms, Y)
     for other in (one_thread, one_chunk):
         assert np.array_equal(chunked.status, other.status)
