@@ -10,7 +10,7 @@ of the paper (Fornasier, Haškovec, Vybíral) maps onto the packages::
 See ``docs/`` and ``docs/architecture.md``.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 from .errors import (
     ConfigError,

@@ -152,5 +152,3 @@ def test_strategies_resume(tmp_path):
         assert (a["max_error"], a["final_error"]) == (b["max_error"], b["final_error"])
     assert again.rows[0]["simulate_s"] == first.rows[0]["simulate_s"]      # loaded
     assert json.loads((tmp_path / "strategies.json").read_text())["stages"] == again.stages
-    # the old import path still works
-    assert fig4.strategies is strategies

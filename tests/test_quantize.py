@@ -444,6 +444,7 @@ def test_budget_with_an_astronomical_atom_budget():
 # and past one limit (max_bytes=, else KINRED_MAX_BYTES, else 2 GiB) raises TooLarge naming
 # the atoms, the bytes, the limit and what would fit.
 _plan_mod = importlib.import_module("kinred.quantize._plan")
+_planning_mod = importlib.import_module("kinred.quantize._planning")   # where budgets are asked
 _error_mod = importlib.import_module("kinred.quantize._error1d")
 DECAYING = Path(__file__).resolve().parents[1] / "examples" / "measures" / "decaying-200.toml"
 MU200 = TensorProduct([Uniform(0.0, 1.0)] * 200)
@@ -462,8 +463,8 @@ def _suggested_eps(message: str) -> float:
 def _refuse(monkeypatch, mu, eps):
     """quantize(mu, eps) → (message, traced peak bytes, the eps of every budget computed)."""
     seen = []
-    real = _plan_mod.budget
-    monkeypatch.setattr(_plan_mod, "budget", lambda w, **kw: seen.append(kw["eps"]) or real(w, **kw))
+    real = _planning_mod.budget
+    monkeypatch.setattr(_planning_mod, "budget", lambda w, **kw: seen.append(kw["eps"]) or real(w, **kw))
     tracemalloc.start()
     try:
         with pytest.raises(TooLarge) as exc:

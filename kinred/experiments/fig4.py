@@ -349,12 +349,3 @@ def write_outputs(result: Fig4Result, out_dir) -> Path:
                           caption="relative recovery error of v"))
     folder.write_text("report.html", rep.to_html())
     return summary
-
-
-def __getattr__(name):
-    """``strategies`` and ``StrategiesResult`` moved to :mod:`.recovery_strategies`."""
-    if name in ("strategies", "StrategiesResult"):
-        from . import recovery_strategies
-
-        return getattr(recovery_strategies, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -30,7 +30,7 @@ def _attr(value):
 
 def to_xarray(tr):
     """The trajectory ``tr`` as an ``xarray.Dataset`` (see :meth:`Trajectory.to_xarray`)."""
-    from .. import __version__
+    from .._version import __version__
 
     xr = _import_xarray()
     data_vars, coords = {}, {"time": ("time", np.asarray(tr.t, dtype=float))}

@@ -14,7 +14,8 @@ from ..errors import TooLarge
 from ..measures import Atomic, Measure
 from ._budget import Budget
 from ._error1d import w1_quantile
-from ._size import block_rows, chunks_bytes, fmt_count, materialize_bytes, max_bytes_limit
+from ._planning import materialize_fit
+from ._size import block_rows, chunks_bytes, fmt_count, largest, materialize_bytes, max_bytes_limit
 
 __all__ = [
     "Quantization",
@@ -100,7 +101,7 @@ class Quantization:
         rows = min(chunk_size, max(stop - start, 1))
 
         def fit():
-            k = _largest(lambda r: chunks_bytes(r, self._width) <= limit, rows)
+            k = largest(lambda r: chunks_bytes(r, self._width) <= limit, rows)
             return f"chunk_size <= {k} fits" if k else "no chunk size fits: raise max_bytes"
 
         check_alloc(chunks_bytes(rows, self._width), f"iter_chunks(chunk_size={chunk_size})", fit,
@@ -144,8 +145,6 @@ class Quantization:
             )
 
         def fit():
-            from ._plan import materialize_fit  # the planner builds these classes
-
             return f"{materialize_fit(self, limit)}; or stream them with iter_chunks()"
 
         check_alloc(self.materialize_bytes, "materialize()", fit, max_bytes=limit,
@@ -158,17 +157,6 @@ class Quantization:
             pts[i:i + m], w[i:i + m] = self._block(i, m)
         w /= w.sum()
         return Atomic(pts, w)
-
-
-def _largest(fits, hi: int) -> int:
-    """Largest ``k`` in ``[1, hi]`` with ``fits(k)`` for a monotone ``fits`` (0 if none)."""
-    if not fits(1):
-        return 0
-    lo = 1
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        lo, hi = (mid, hi) if fits(mid) else (lo, mid - 1)
-    return lo
 
 
 @dataclass(frozen=True, eq=False, repr=False)

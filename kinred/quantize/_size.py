@@ -87,3 +87,14 @@ def chunks_bytes(rows: int, width: int) -> int:
 def materialize_bytes(n_atoms: int, dim: int, width: int) -> int:
     """Peak of :meth:`Quantization.materialize`: the atom array and one block of temporaries."""
     return n_atoms * atom_bytes(dim) + chunks_bytes(min(n_atoms, block_rows(width)), width)
+
+
+def largest(fits, hi: int) -> int:
+    """Largest ``k`` in ``[1, hi]`` with ``fits(k)`` for a monotone ``fits`` (0 if none)."""
+    if not fits(1):
+        return 0
+    lo = 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid - 1)
+    return lo

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ...errors import InvalidInput
+from ._config import CostResult
 from ._registry import REGISTRY
 
 
@@ -36,7 +37,6 @@ def write_outputs(result, out_dir) -> Path:
     """
     from ...io import ResultFolder
     from ...report import Report, draw_figure
-    from . import CostResult
 
     if not isinstance(result, CostResult):
         raise InvalidInput(f"result must be a CostResult, got {type(result).__name__}")
