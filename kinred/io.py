@@ -12,8 +12,9 @@ A reader therefore sees either the old file or the complete new one, never a hal
 file; if anything fails (an exception, ``KeyboardInterrupt``) before step 3, the temporary
 file is removed and the destination is untouched. The file gets the usual permissions
 (``0o666`` minus the umask, e.g. ``0644``). A destination that is an existing directory, or
-that cannot be written (permission, missing parent that cannot be created, full disk), raises
-:class:`~kinred.errors.InvalidInput` naming the path. Only a hard kill (``SIGKILL``, power loss)
+that cannot be written (permission, missing parent that cannot be created) raises
+:class:`~kinred.errors.InvalidInput` naming the path; a full device (``ENOSPC``, or an
+exhausted quota) raises :class:`~kinred.errors.DiskFull` ("no space left on device"). Only a hard kill (``SIGKILL``, power loss)
 between steps 1 and 3 can leave a hidden ``*.tmp`` file behind; :meth:`ResultFolder.clean_temporary`
 removes such leftovers and :meth:`ResultFolder.list` never shows them.
 
@@ -37,12 +38,15 @@ studies use it, with the same rules and messages.
 
 from __future__ import annotations
 
+import errno
+import inspect
 import io as _io
 import json
 import os
 import tempfile
 import tomllib
 import warnings
+import weakref
 import zipfile
 import zlib
 from pathlib import Path
@@ -50,7 +54,9 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .errors import ConfigError, DamagedFile, InvalidInput, KinredWarning, StoreMismatch
+from ._lock import FolderLock, is_lock_file
+from .errors import (ConfigError, DamagedFile, DiskFull, InvalidInput, KinredWarning,
+                     StoreMismatch)
 
 __all__ = [
     "atomic_write_bytes",
@@ -116,7 +122,16 @@ def _os_reason(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
-def _write_error(path: Path, exc: OSError) -> InvalidInput:
+#: errno values of a full device or an exhausted quota (:class:`~kinred.errors.DiskFull`).
+_NO_SPACE = {errno.ENOSPC} | ({errno.EDQUOT} if hasattr(errno, "EDQUOT") else set())
+
+
+def _write_error(path: Path, exc: OSError) -> InvalidInput | DiskFull:
+    if exc.errno in _NO_SPACE:
+        what = ("no space left on device" if exc.errno == errno.ENOSPC
+                else "no space left on device (disk quota exceeded)")
+        return DiskFull(f"{path}: cannot write the file: {what}; free some space (or choose "
+                        "another folder) and run again", path=os.fspath(path))
     return InvalidInput(f"{path}: cannot write the file: {_os_reason(exc)}")
 
 
@@ -555,7 +570,7 @@ class ResultFolder:
             return []
         names = []
         for p in root.rglob("*"):
-            if p.is_file() and not _is_temporary(p.name):
+            if p.is_file() and not _is_temporary(p.name) and not is_lock_file(p.name):
                 names.append(p.relative_to(self.path).as_posix())
         return sorted(names)
 
@@ -598,6 +613,22 @@ def _differences(old, new, prefix: str = "") -> list[str]:
     return [] if old == new else [prefix.rstrip(".") or "(the description)"]
 
 
+def _takes_stamp(save) -> bool:
+    """Whether the saver ``save`` takes a third argument (the stamp)."""
+    try:
+        params = inspect.signature(save).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    kinds = [p.kind for p in params]
+    return (inspect.Parameter.VAR_POSITIONAL in kinds
+            or sum(k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+                   for k in kinds) >= 3)
+
+
+#: Array of a stage file holding the digest of the configuration that wrote it.
+STAGE_DIGEST = "__digest__"
+
+
 class StageStore:
     """The stage files of one computation, tied to its configuration by a digest.
 
@@ -612,7 +643,12 @@ class StageStore:
         JSON: the digest (under ``digest_key``) and ``describe``; written when the store is
         created, before any stage.
     ``folder/<name>.npz``
-        One file per finished stage (``name`` may contain ``/``).
+        One file per finished stage (``name`` may contain ``/``), holding the digest of the
+        configuration that wrote it (array ``__digest__``).
+
+    An open store owns its folder: it holds the folder's lock (:mod:`kinred._lock`, the file
+    ``.kinred.lock``) until :meth:`close` (or ``with``, or the end of the process), and another
+    process opening it is refused (:class:`~kinred.errors.FolderInUse`, naming the holder).
 
     Opening a folder:
 
@@ -627,8 +663,10 @@ class StageStore:
       (:class:`~kinred.errors.DamagedFile`): it is what ties the stage files to a
       configuration, so they cannot be trusted without it.
 
-    A damaged stage file (truncated, not an ``.npz`` archive, missing arrays: whatever makes
-    the loader raise :class:`~kinred.errors.DamagedFile`) is named in a
+    Loading: a stage file is loaded only with ``resume=True`` (or when this store wrote it):
+    a new run computes every stage. A stage file whose digest is not this store's (or that has
+    none) and a damaged one (truncated, not an ``.npz`` archive, missing arrays: whatever makes
+    the loader raise :class:`~kinred.errors.DamagedFile`) are named in a
     :class:`~kinred.errors.KinredWarning` and recomputed.
 
     Parameters
@@ -667,6 +705,7 @@ class StageStore:
     >>> again = StageStore(path, "d1", resume=True)
     >>> again.get_or_compute("a", lambda: 1 / 0)["x"], again.status
     (array([0, 1, 2]), {'a': 'loaded'})
+    >>> store.close(); again.close()
     >>> StageStore(path, "d2", resume=True)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
@@ -693,32 +732,58 @@ class StageStore:
         self.store_name, self.item = store_name, item
         self.describe = to_jsonable(dict(describe or {}))
         self.status: dict[str, str] = {}
+        self.resume = bool(resume)
+        self._written: set[str] = set()
+        self._lock = None
         self.folder = None if folder is None else self._open(Path(folder), bool(resume))
 
     def __repr__(self) -> str:
         where = None if self.folder is None else str(self.folder.path)
         return f"StageStore({where!r}, {self.digest[:12]!r}…)"
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        """Release the folder's lock (the stage files stay); loading and saving still work."""
+        if self._lock is not None:
+            self._lock.release()
+
     # -- opening ----------------------------------------------------------------------------
-    def _open(self, path: Path, resume: bool) -> ResultFolder:
+    def _refuse(self, path: Path, resume: bool) -> bool:
+        """Raise if the folder cannot take this run; ``True`` when it holds a run (its index)."""
         if (path / self.index).is_file():
-            folder = ResultFolder(path)
             if not resume:
                 raise StoreMismatch(
                     f"{self.store_name} {path} already holds a run; continue it with resume=True "
                     "(--resume on the command line) or choose another folder",
                     path=str(path), reason="resume")
-            self._check_digest(folder)
-        elif path.exists() and (not path.is_dir() or any(not _is_temporary(p.name)
-                                                         for p in path.iterdir())):
+            return True
+        if path.exists() and (not path.is_dir() or any(
+                not _is_temporary(p.name) and not is_lock_file(p.name) for p in path.iterdir())):
             raise StoreMismatch(
                 f"{path} exists and is not {_article(self.store_name)} {self.store_name} (no "
                 f"{self.index}); choose a new or empty directory", path=str(path),
                 reason="foreign")
-        else:
-            folder = ResultFolder(path)
-            folder.write_json(self.index, {self.digest_key: self.digest, **self.describe})
-        folder.clean_temporary()
+        return False
+
+    def _open(self, path: Path, resume: bool) -> ResultFolder:
+        self._refuse(path, resume)              # before touching the folder
+        folder = ResultFolder(path)
+        self._lock = FolderLock(path, what=self.store_name).acquire()
+        weakref.finalize(self, self._lock.release)
+        try:
+            if self._refuse(path, resume):      # again, now that the folder is ours
+                self._check_digest(folder)
+            else:
+                folder.write_json(self.index, {self.digest_key: self.digest, **self.describe})
+            folder.clean_temporary()
+        except BaseException:
+            self._lock.release()
+            raise
         return folder
 
     def _stored_index(self, folder: ResultFolder) -> dict:
@@ -757,36 +822,71 @@ class StageStore:
             raise InvalidInput(f"name must be a non-empty str, got {name!r}")
         return None if self.folder is None else self.folder / f"{name}.npz"
 
+    def _stamp_problem(self, path: Path) -> str:
+        """Why the stage file ``path`` is not this run's ("" if its digest is this store's, or
+        if it cannot be decoded: the loader then reports the damage)."""
+        try:
+            with open(path, "rb") as fh:
+                z = np.load(fh, allow_pickle=False)
+                if not isinstance(z, np.lib.npyio.NpzFile):
+                    return ""
+                with z:
+                    stored = str(z[STAGE_DIGEST]) if STAGE_DIGEST in z.files else None
+        except _NPZ_DAMAGE:
+            return ""
+        if stored is None:
+            return (f"{path}: {self.item} file without a configuration digest (not written by "
+                    "this version of kinred): it cannot be tied to this run")
+        if stored != self.digest:
+            return (f"{path}: {self.item} file of another configuration (digest {stored[:12]}… "
+                    f"!= {self.digest[:12]}… of this run)")
+        return ""
+
     def load(self, name: str, *, load: Callable[[Path], Any] | None = None,
              label: str | None = None):
-        """The stored value of stage ``name``, or ``None`` if it is absent or damaged.
+        """The stored value of stage ``name``, or ``None`` if it is absent, damaged, of another
+        configuration, or the store was not opened with ``resume=True`` (and did not write it).
 
         ``load(path)`` reads the file (default: :func:`read_npz`); a
-        :class:`~kinred.errors.DamagedFile` it raises becomes a
-        :class:`~kinred.errors.KinredWarning` ``"<path>: damaged ...; recomputing <label>"``
-        and ``None``, with ``label`` by default ``"the <item>"``.
+        :class:`~kinred.errors.DamagedFile` it raises, and a file whose digest is not the
+        store's, become a :class:`~kinred.errors.KinredWarning`
+        ``"<path>: ...; recomputing <label>"`` and ``None``, with ``label`` by default
+        ``"the <item>"``. A dict value is returned without its ``__digest__`` entry.
         """
         path = self.path(name)
-        if path is None or not path.is_file():
+        if path is None or not path.is_file() or not (self.resume or name in self._written):
             return None
         try:
-            if load is None:
-                return read_npz(path, what=f"{self.item} file")
-            return load(path)
+            value = read_npz(path, what=f"{self.item} file") if load is None else load(path)
+            problem = self._stamp_problem(path)       # a sound file: is it this run's?
+            if problem:
+                raise DamagedFile(problem, path=str(path))
         except DamagedFile as exc:
             warnings.warn(f"{exc}; recomputing {label or 'the ' + self.item}", KinredWarning,
                           stacklevel=3)
             return None
+        if isinstance(value, dict):
+            value.pop(STAGE_DIGEST, None)
+        return value
 
-    def save(self, name: str, value, *, save: Callable[[Path, Any], Any] | None = None) -> None:
-        """Write stage ``name`` atomically: ``save(path, value)``, default :func:`atomic_write_npz`."""
+    def save(self, name: str, value, *,
+             save: Callable[[Path, Any, Mapping[str, Any]], Any] | None = None) -> None:
+        """Write stage ``name`` atomically with the store's digest: by default
+        :func:`atomic_write_npz` of the mapping ``value`` plus ``__digest__``; else
+        ``save(path, value, stamp)``, which must write the arrays of ``stamp`` into its
+        ``.npz`` archive (a two-argument ``save(path, value)`` writes a format of its own,
+        without the digest: such an ``.npz`` file is recomputed on resume)."""
         path = self.path(name)
         if path is None:
             return
+        stamp = {STAGE_DIGEST: np.array(self.digest)}
         if save is None:
-            atomic_write_npz(path, value)
-        else:
+            atomic_write_npz(path, {**value, **stamp})
+        elif _takes_stamp(save):
+            save(path, value, stamp)
+        else:                     # a saver of its own format: its files carry no digest
             save(path, value)
+        self._written.add(name)
 
     def get_or_compute(self, name: str, compute: Callable[[], Any], *,
                        load: Callable[[Path], Any] | None = None,
