@@ -164,10 +164,14 @@ class FolderLock:
                 fd = self._open(os.O_RDWR | os.O_CREAT)
                 try:
                     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                except OSError:
+                except BlockingIOError:
                     holder = _read_holder(fd)
                     os.close(fd)
                     raise self._busy(holder) from None
+                except OSError as exc:      # e.g. a file system without locks
+                    os.close(fd)
+                    raise InvalidInput(f"{self.folder}: cannot lock the {self.what}: "
+                                       f"{exc.strerror or exc}") from None
             try:  # the file we locked must still be the folder's lock (not one just released)
                 same = os.path.samestat(os.fstat(fd), os.stat(self.path))
             except OSError:

@@ -504,6 +504,9 @@ class ResultFolder:
         try:
             self.path.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
+            if exc.errno in _NO_SPACE:
+                raise DiskFull(f"{self.path}: cannot create the result folder: no space left "
+                               "on device", path=str(self.path)) from None
             raise InvalidInput(f"{self.path}: cannot create the result folder: "
                                f"{_os_reason(exc)}") from None
 

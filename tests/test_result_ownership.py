@@ -281,6 +281,13 @@ def test_a_full_disk_is_its_own_error(tmp_path, monkeypatch, where):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]   # no temporary left
 
 
+def test_a_result_folder_on_a_full_disk(tmp_path, monkeypatch):
+    monkeypatch.setattr(Path, "mkdir", _enospc)
+    with pytest.raises(DiskFull, match=r"x: cannot create the result folder: no space left on "
+                                       r"device$"):
+        kio.ResultFolder(tmp_path / "x")
+
+
 def test_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, main, capsys):
     scene = _scene(tmp_path, "A.toml", 1)
     real = kio.os.fsync
