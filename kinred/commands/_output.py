@@ -35,6 +35,7 @@ and each of its files matches the command's :class:`Layout` or the marker's list
 
 from __future__ import annotations
 
+import errno
 import fnmatch
 import json
 import sys
@@ -42,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .._lock import FolderLock, is_lock_file
-from ..errors import InvalidInput
+from ..errors import DiskFull, InvalidInput
 from ..io import atomic_write_json
 
 __all__ = ["RESULTS", "MARKER", "Layout", "default_out", "prepare", "record", "LAYOUTS",
@@ -204,6 +205,9 @@ def prepare(out, layout: Layout, *, resume: bool, stream=None) -> Path:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
+        if exc.errno == errno.ENOSPC:
+            raise DiskFull(f"--out {out}: cannot create the folder: no space left on device",
+                           path=str(out)) from None
         raise InvalidInput(f"--out {out}: cannot create the folder: {exc.strerror}") from None
     lock = FolderLock(out, what="result folder").acquire()
     try:
