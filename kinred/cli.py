@@ -83,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args) -> int:
+    from ._lock import release_all
+
     try:
         code = args._run(args)
     except KinredError as exc:
@@ -98,6 +100,8 @@ def _run(args) -> int:
         except OSError:
             pass
         return 141
+    finally:
+        release_all()                         # the result folders the command held
     return 0 if code is None else int(code)
 
 

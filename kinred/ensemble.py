@@ -334,8 +334,9 @@ def _member_name(index: int) -> str:
     return f"members/{index:06d}"
 
 
-def _write_member(path: Path, member: tuple) -> None:
-    """Write ``(index, params, out, wall)`` as one archive (arrays + a ``__meta__`` JSON entry)."""
+def _write_member(path: Path, member: tuple, stamp=None) -> None:
+    """Write ``(index, params, out, wall)`` as one archive (arrays + a ``__meta__`` JSON entry,
+    + the store's ``stamp``: its digest, :meth:`kinred.io.StageStore.save`)."""
     index, params, out, wall = member
     arrays = {k: v for k, v in out.items() if isinstance(v, np.ndarray)}
     scalars = {k: v for k, v in out.items() if not isinstance(v, np.ndarray)}
@@ -347,6 +348,7 @@ def _write_member(path: Path, member: tuple) -> None:
         "order": list(out),
     }
     arrays[_META] = np.array(json.dumps(meta, allow_nan=True))
+    arrays.update(stamp or {})
     atomic_write_npz(path, arrays)
 
 
@@ -747,6 +749,7 @@ def run_ensemble(
             "total_time": total,
             "member_time_sum": float(np.sum(walls)),
         })
+    stages.close()                # release the store folder's lock
     return EnsembleResult(
         members=tuple(members),
         results=tuple(results),

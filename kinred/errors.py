@@ -22,6 +22,8 @@ __all__ = [
     "NotProjectable",
     "DamagedFile",
     "StoreMismatch",
+    "FolderInUse",
+    "DiskFull",
     "MissingDependency",
     "KinredWarning",
 ]
@@ -99,6 +101,57 @@ class StoreMismatch(InvalidInput):
 
 def _rebuild_mismatch(message, path, reason):
     return StoreMismatch(message, path=path, reason=reason)
+
+
+class FolderInUse(InvalidInput):
+    """A result folder (or store) is owned by another running process (its lock file
+    ``.kinred.lock`` is held); the message names the holder: pid, host, start time, command.
+
+    Attributes
+    ----------
+    path : str
+        The folder.
+    holder : dict
+        What the lock file says about its holder (``pid``, ``host``, ``started``, ``command``).
+    """
+
+    def __init__(self, message: str, *, path: str = "", holder: dict | None = None):
+        super().__init__(message)
+        self.path = path
+        self.holder = dict(holder or {})
+
+    def __reduce__(self):
+        return (_rebuild_in_use, (str(self), self.path, self.holder))
+
+
+def _rebuild_in_use(message, path, holder):
+    return FolderInUse(message, path=path, holder=holder)
+
+
+class DiskFull(KinredError, OSError):
+    """A file could not be written because the device is full (``ENOSPC``) or the disk quota
+    is exhausted (``EDQUOT``); the message names the file and says "no space left on device".
+    Nothing was replaced: the destination keeps its previous content.
+
+    Attributes
+    ----------
+    path : str
+        The file that could not be written.
+    """
+
+    def __init__(self, message: str, *, path: str = ""):
+        super().__init__(message)
+        self.path = path
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+    def __reduce__(self):
+        return (_rebuild_disk_full, (str(self), self.path))
+
+
+def _rebuild_disk_full(message, path):
+    return DiskFull(message, path=path)
 
 
 class SimulationDiverged(KinredError, FloatingPointError):

@@ -12,8 +12,9 @@ A reader therefore sees either the old file or the complete new one, never a hal
 file; if anything fails (an exception, ``KeyboardInterrupt``) before step 3, the temporary
 file is removed and the destination is untouched. The file gets the usual permissions
 (``0o666`` minus the umask, e.g. ``0644``). A destination that is an existing directory, or
-that cannot be written (permission, missing parent that cannot be created, full disk), raises
-:class:`~kinred.errors.InvalidInput` naming the path. Only a hard kill (``SIGKILL``, power loss)
+that cannot be written (permission, missing parent that cannot be created) raises
+:class:`~kinred.errors.InvalidInput` naming the path; a full device (``ENOSPC``, or an
+exhausted quota) raises :class:`~kinred.errors.DiskFull` ("no space left on device"). Only a hard kill (``SIGKILL``, power loss)
 between steps 1 and 3 can leave a hidden ``*.tmp`` file behind; :meth:`ResultFolder.clean_temporary`
 removes such leftovers and :meth:`ResultFolder.list` never shows them.
 
@@ -37,12 +38,12 @@ studies use it, with the same rules and messages.
 
 from __future__ import annotations
 
+import errno
 import io as _io
 import json
 import os
 import tempfile
 import tomllib
-import warnings
 import zipfile
 import zlib
 from pathlib import Path
@@ -50,7 +51,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .errors import ConfigError, DamagedFile, InvalidInput, KinredWarning, StoreMismatch
+from ._lock import is_lock_file
+from .errors import ConfigError, DamagedFile, DiskFull, InvalidInput
 
 __all__ = [
     "atomic_write_bytes",
@@ -116,7 +118,16 @@ def _os_reason(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
-def _write_error(path: Path, exc: OSError) -> InvalidInput:
+#: errno values of a full device or an exhausted quota (:class:`~kinred.errors.DiskFull`).
+_NO_SPACE = {errno.ENOSPC} | ({errno.EDQUOT} if hasattr(errno, "EDQUOT") else set())
+
+
+def _write_error(path: Path, exc: OSError) -> InvalidInput | DiskFull:
+    if exc.errno in _NO_SPACE:
+        what = ("no space left on device" if exc.errno == errno.ENOSPC
+                else "no space left on device (disk quota exceeded)")
+        return DiskFull(f"{path}: cannot write the file: {what}; free some space (or choose "
+                        "another folder) and run again", path=os.fspath(path))
     return InvalidInput(f"{path}: cannot write the file: {_os_reason(exc)}")
 
 
@@ -489,6 +500,9 @@ class ResultFolder:
         try:
             self.path.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
+            if exc.errno in _NO_SPACE:
+                raise DiskFull(f"{self.path}: cannot create the result folder: no space left "
+                               "on device", path=str(self.path)) from None
             raise InvalidInput(f"{self.path}: cannot create the result folder: "
                                f"{_os_reason(exc)}") from None
 
@@ -555,7 +569,7 @@ class ResultFolder:
             return []
         names = []
         for p in root.rglob("*"):
-            if p.is_file() and not _is_temporary(p.name):
+            if p.is_file() and not _is_temporary(p.name) and not is_lock_file(p.name):
                 names.append(p.relative_to(self.path).as_posix())
         return sorted(names)
 
@@ -578,229 +592,6 @@ def _is_temporary(name: str) -> bool:
     return name.startswith(".") and name.endswith(_TMP_SUFFIX)
 
 
-# ----------------------------------------------------------------------------------------------
-# The stage store
-# ----------------------------------------------------------------------------------------------
-def _article(noun: str) -> str:
-    return "an" if noun[:1].lower() in "aeiou" else "a"
-
-
-def _differences(old, new, prefix: str = "") -> list[str]:
-    """Dotted keys where two JSON descriptions differ (tables compared key by key)."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        out: list[str] = []
-        for key in sorted(set(old) | set(new), key=str):
-            if key not in old or key not in new:
-                out.append(f"{prefix}{key}")
-            elif old[key] != new[key]:
-                out += _differences(old[key], new[key], f"{prefix}{key}.")
-        return out
-    return [] if old == new else [prefix.rstrip(".") or "(the description)"]
-
-
-class StageStore:
-    """The stage files of one computation, tied to its configuration by a digest.
-
-    :meth:`get_or_compute` loads a stage whose file exists and computes (then writes, atomically)
-    one that does not, so an interrupted run -- even ``SIGKILL`` -- resumes where it stopped
-    and loses only the stage in flight. ``kinred run`` keeps its stages in ``OUT/stages``
-    (index ``config.json``), :func:`kinred.ensemble.run_ensemble` its members in its store
-    (index ``run.json``, stage names ``members/000123``), and the paper studies their
-    ensembles there; the rules and messages are the same for all:
-
-    ``folder/<index>``
-        JSON: the digest (under ``digest_key``) and ``describe``; written when the store is
-        created, before any stage.
-    ``folder/<name>.npz``
-        One file per finished stage (``name`` may contain ``/``).
-
-    Opening a folder:
-
-    * without an index and empty (or missing): a new store; temporary files of a killed writer
-      are removed;
-    * holding a run (its index exists): refused without ``resume=True``
-      (:class:`~kinred.errors.StoreMismatch`, ``reason="resume"``); with it, the stored digest
-      must equal ``digest`` (else ``reason="different"``, naming the keys of ``describe`` that
-      differ);
-    * holding other files and no index: refused (``reason="foreign"``);
-    * a damaged index (empty, cut, not UTF-8, no digest): refused
-      (:class:`~kinred.errors.DamagedFile`): it is what ties the stage files to a
-      configuration, so they cannot be trusted without it.
-
-    A damaged stage file (truncated, not an ``.npz`` archive, missing arrays: whatever makes
-    the loader raise :class:`~kinred.errors.DamagedFile`) is named in a
-    :class:`~kinred.errors.KinredWarning` and recomputed.
-
-    Parameters
-    ----------
-    folder : str, os.PathLike or None
-        The store's directory (created with its parents); ``None`` stores nothing and computes
-        every stage.
-    digest : str
-        Hash of everything that determines the stages' contents.
-    resume : bool
-        Continue the run the folder holds (a missing store is simply created).
-    describe : mapping, optional
-        JSON description of the run written into the index next to the digest; on a digest
-        mismatch the message names its keys that differ.
-    index : str
-        File name of the index inside ``folder``.
-    digest_key : str
-        Key of the digest in the index.
-    store_name, item : str
-        How messages call the store (``"stage store"``, ``"ensemble store"``) and one stage
-        (``"stage"``, ``"member"``).
-
-    Attributes
-    ----------
-    folder : ResultFolder or None
-    status : dict
-        ``{name: "loaded" | "computed"}`` for every stage asked for, in order.
-
-    Examples
-    --------
-    >>> import tempfile
-    >>> path = tempfile.mkdtemp()
-    >>> store = StageStore(path, "d1")
-    >>> store.get_or_compute("a", lambda: {"x": np.arange(3)})["x"]
-    array([0, 1, 2])
-    >>> again = StageStore(path, "d1", resume=True)
-    >>> again.get_or_compute("a", lambda: 1 / 0)["x"], again.status
-    (array([0, 1, 2]), {'a': 'loaded'})
-    >>> StageStore(path, "d2", resume=True)  # doctest: +ELLIPSIS
-    Traceback (most recent call last):
-    ...
-    kinred.errors.StoreMismatch: stage store ... holds a run of a different configuration ...
-    """
-
-    def __init__(self, folder, digest: str, *, resume: bool = False,
-                 describe: Mapping[str, Any] | None = None, index: str = "config.json",
-                 digest_key: str = "digest", store_name: str = "stage store",
-                 item: str = "stage"):
-        if folder is not None and (isinstance(folder, bytes)
-                                   or not isinstance(folder, (str, os.PathLike))):
-            raise InvalidInput(f"folder must be a directory path (str or os.PathLike) or None, "
-                               f"got {folder!r}")
-        for name, value in (("digest", digest), ("index", index), ("digest_key", digest_key),
-                            ("store_name", store_name), ("item", item)):
-            if not isinstance(value, str) or not value:
-                raise InvalidInput(f"{name} must be a non-empty str, got {value!r}")
-        if not isinstance(resume, (bool, np.bool_)):
-            raise InvalidInput(f"resume must be True or False, got {resume!r}")
-        if describe is not None and not isinstance(describe, Mapping):
-            raise InvalidInput(f"describe must be a mapping (JSON object) or None, got {describe!r}")
-        self.digest, self.index, self.digest_key = digest, index, digest_key
-        self.store_name, self.item = store_name, item
-        self.describe = to_jsonable(dict(describe or {}))
-        self.status: dict[str, str] = {}
-        self.folder = None if folder is None else self._open(Path(folder), bool(resume))
-
-    def __repr__(self) -> str:
-        where = None if self.folder is None else str(self.folder.path)
-        return f"StageStore({where!r}, {self.digest[:12]!r}…)"
-
-    # -- opening ----------------------------------------------------------------------------
-    def _open(self, path: Path, resume: bool) -> ResultFolder:
-        if (path / self.index).is_file():
-            folder = ResultFolder(path)
-            if not resume:
-                raise StoreMismatch(
-                    f"{self.store_name} {path} already holds a run; continue it with resume=True "
-                    "(--resume on the command line) or choose another folder",
-                    path=str(path), reason="resume")
-            self._check_digest(folder)
-        elif path.exists() and (not path.is_dir() or any(not _is_temporary(p.name)
-                                                         for p in path.iterdir())):
-            raise StoreMismatch(
-                f"{path} exists and is not {_article(self.store_name)} {self.store_name} (no "
-                f"{self.index}); choose a new or empty directory", path=str(path),
-                reason="foreign")
-        else:
-            folder = ResultFolder(path)
-            folder.write_json(self.index, {self.digest_key: self.digest, **self.describe})
-        folder.clean_temporary()
-        return folder
-
-    def _stored_index(self, folder: ResultFolder) -> dict:
-        path = folder / self.index
-        try:
-            stored = folder.read_json(self.index, what="store description")
-            if not isinstance(stored, dict) or not isinstance(stored.get(self.digest_key), str):
-                raise DamagedFile(f"{path}: damaged store description: no configuration digest",
-                                  path=str(path))
-        except DamagedFile as exc:
-            raise DamagedFile(
-                f"{exc}; it ties the {self.item} files to a run, so they cannot be resumed: "
-                f"delete the store, i.e. delete the folder {folder.path} and run again, or run "
-                "into another output folder", path=str(path)) from None
-        return stored
-
-    def _check_digest(self, folder: ResultFolder) -> None:
-        stored = self._stored_index(folder)
-        if stored[self.digest_key] == self.digest:
-            return
-        now = json.loads(json.dumps(self.describe))
-        differ = _differences({k: v for k, v in stored.items() if k != self.digest_key}, now)
-        detail = ""
-        if differ:
-            detail = "; differs: " + ", ".join(differ[:4]) + (", …" if len(differ) > 4 else "")
-        raise StoreMismatch(
-            f"{self.store_name} {folder.path} holds a run of a different configuration (config "
-            f"hash {stored[self.digest_key][:12]}… != {self.digest[:12]}… of this run{detail}); "
-            "resume it with the same configuration or choose another folder",
-            path=str(folder.path), reason="different")
-
-    # -- stages -----------------------------------------------------------------------------
-    def path(self, name: str) -> Path | None:
-        """The file of stage ``name`` (``None`` without a folder)."""
-        if not isinstance(name, str) or not name:
-            raise InvalidInput(f"name must be a non-empty str, got {name!r}")
-        return None if self.folder is None else self.folder / f"{name}.npz"
-
-    def load(self, name: str, *, load: Callable[[Path], Any] | None = None,
-             label: str | None = None):
-        """The stored value of stage ``name``, or ``None`` if it is absent or damaged.
-
-        ``load(path)`` reads the file (default: :func:`read_npz`); a
-        :class:`~kinred.errors.DamagedFile` it raises becomes a
-        :class:`~kinred.errors.KinredWarning` ``"<path>: damaged ...; recomputing <label>"``
-        and ``None``, with ``label`` by default ``"the <item>"``.
-        """
-        path = self.path(name)
-        if path is None or not path.is_file():
-            return None
-        try:
-            if load is None:
-                return read_npz(path, what=f"{self.item} file")
-            return load(path)
-        except DamagedFile as exc:
-            warnings.warn(f"{exc}; recomputing {label or 'the ' + self.item}", KinredWarning,
-                          stacklevel=3)
-            return None
-
-    def save(self, name: str, value, *, save: Callable[[Path, Any], Any] | None = None) -> None:
-        """Write stage ``name`` atomically: ``save(path, value)``, default :func:`atomic_write_npz`."""
-        path = self.path(name)
-        if path is None:
-            return
-        if save is None:
-            atomic_write_npz(path, value)
-        else:
-            save(path, value)
-
-    def get_or_compute(self, name: str, compute: Callable[[], Any], *,
-                       load: Callable[[Path], Any] | None = None,
-                       save: Callable[[Path, Any], Any] | None = None, label: str | None = None):
-        """The value of stage ``name``: loaded if its file is there and sound, else ``compute()``
-        written at once (see :meth:`load` and :meth:`save` for ``load``, ``save``, ``label``).
-
-        ``status[name]`` records which of the two happened.
-        """
-        value = self.load(name, load=load, label=label)
-        if value is not None:
-            self.status[name] = "loaded"
-            return value
-        value = compute()
-        self.save(name, value, save=save)
-        self.status[name] = "computed"
-        return value
+# The stage store: its own module (kinred._stages), which uses the writers and readers above
+# (imported here, at the end, when they are defined).
+from ._stages import STAGE_DIGEST, StageStore  # noqa: E402,F401

@@ -492,11 +492,12 @@ TABLES: dict[str, tuple] = {
         Key("rule", "string", "midpoint", '"midpoint" (σ/2N) or "paper" (σ/N, eq. (4.21))',
             choices=("midpoint", "paper")),
         Key("reference_atoms", "integer", None, "finer reference for estimates of "
-            "W1(μ_M(t), ν(t))", low=1),
+            "W1(μ_M(t), ν(t)); more than atoms (with eps: more than the N the budget "
+            "picks, checked when the run has quantized)", low=1),
         Key("max_atoms", "integer", 200_000, "refusal limit of the atom count", low=1),
     ),
     "projection": (
-        Key("k", "array of integers", REQUIRED, "target dimensions, 1 ≤ k ≤ d"),
+        Key("k", "array of integers", REQUIRED, "target dimensions, 1 ≤ k ≤ d, each once"),
         Key("kind", "string", "gaussian", "the JL family", choices=_projection_kinds),
         Key("seed", "integer", 0, "M for k uses member_seed(seed, k)", low=0),
     ),
@@ -757,16 +758,26 @@ def _read_tables(data: dict, source: str, smoke: bool):
     return top, tables, origin
 
 
-def _check_quantize(qu: dict, source: str) -> None:
+def _check_quantize(qu: dict, source: str, at) -> None:
     if ("eps" in qu) == ("atoms" in qu):
         raise ConfigError(f"{source}: quantize.eps: give exactly one of quantize.eps and "
                           "quantize.atoms")
+    ref, atoms = qu.get("reference_atoms"), qu.get("atoms")
+    if ref is not None and atoms is not None and ref <= atoms:
+        raise ConfigError(f"{source}: {at('quantize.reference_atoms')}: the reference must be "
+                          f"finer than the run's quantization: need reference_atoms > "
+                          f"{at('quantize.atoms')} = {atoms}, got {ref}")
 
 
 def _check_ks(ks: list, d: int, source: str, at) -> tuple:
     if any(not 1 <= k <= d for k in ks):
         raise ConfigError(f"{source}: {at('projection.k')}: must be a non-empty array of "
                           f"integers in [1, dynamics.d = {d}], got {_short(ks)}")
+    twice = sorted({k for k in ks if ks.count(k) > 1})
+    if twice:
+        raise ConfigError(f"{source}: {at('projection.k')}: each k must appear once (one stage "
+                          f"per k), got {_short(ks)} with {', '.join(map(str, twice))} twice "
+                          "or more")
     return tuple(int(k) for k in ks)
 
 
@@ -845,7 +856,7 @@ def config_from_dict(data: dict, source: str = "<scene>", *, smoke: bool = False
     d = dyn["d"]
     effects = _read_effects(dyn["effect"], d, source)
     pairsum = _read_pairsum(dyn.get("pairsum"), dyn["precision"], source)
-    _check_quantize(qu, source)
+    _check_quantize(qu, source, at)
     ks = _check_ks(pr["k"], d, source, at)
     save_every = _check_time_grid(it, source, at)
     if not out["yes_below"] <= out["no_above"]:

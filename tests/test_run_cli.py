@@ -174,7 +174,7 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == -signal.SIGKILL, p.stderr
     done = sorted(x.name for x in (out / "stages").iterdir())
-    assert done == ["config.json", "reference.npz", "solve.npz"]
+    assert done == [".kinred.lock", "config.json", "reference.npz", "solve.npz"]  # lock: stale
     assert not (out / "summary.json").exists()
     before = {n: (out / "stages" / n).stat().st_mtime_ns for n in ("solve.npz", "reference.npz")}
     content = {n: (out / "stages" / n).read_bytes() for n in before}

@@ -178,7 +178,9 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     Raises
     ------
     InvalidInput
-        Bad arguments; ``method`` other than ``"euler"``; first-order scenes.
+        Bad arguments; ``method`` other than ``"euler"``; first-order scenes; an approximate
+        pair-sum backend (``NUFFT``, ``RandomBatch``, any backend without ``exact = True``:
+        :func:`kinred.pairsum.is_exact`).
     NotProjectable
         Noise, :class:`~kinred.dynamics.Field` or other uncovered effects, kernels without
         a slope bound (e.g. Morse with ``soft = 0``).

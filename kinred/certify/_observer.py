@@ -163,6 +163,8 @@ class CertificateObserver:
                                f"shape {self.P.shape}")
         scene._check_state(self.x0, self.v0)
         self.save_steps = None if save_steps is None else {int(s) for s in save_steps}
+        if not isinstance(paper, (bool, np.bool_)):
+            raise InvalidInput(f"paper must be True or False, got {paper!r}")
         self.paper = bool(paper)
         if states not in (True, False, "x", "v"):
             raise InvalidInput(f"states must be True, False, 'x' or 'v'; got {states!r}")

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..dynamics import CuckerSmale, Drift, Morse, Quadratic, Scene, SelfPropulsion
 from ..errors import InvalidInput, NotProjectable
+from ..pairsum import is_exact
 
 __all__ = ["PairTerm", "Plan", "make_plan"]
 
@@ -112,11 +113,20 @@ def make_plan(scene: Scene, n_agents: int) -> Plan:
     Raises
     ------
     InvalidInput
-        First-order scene.
+        First-order scene; a pair-sum backend that is not exact
+        (:func:`kinred.pairsum.is_exact`: NUFFT, RandomBatch, a backend without
+        ``exact = True``).
     NotProjectable
         Noise, :class:`~kinred.dynamics.Field` or another effect outside class (1.1), a kernel
         without a usable ``slope_bound``.
     """
+    backend = scene.pairsum
+    if not is_exact(backend):
+        raise InvalidInput(
+            f"scene.pairsum = {backend!r} is an approximate pair-sum backend (it does not "
+            "declare exact = True): certificates bound the error of the exact forward-Euler "
+            "scheme, not the backend's own error; valid: an exact backend, Dense() (the "
+            "default) or Numpy()")
     if scene.order != 2:
         raise InvalidInput("scene must be second order (positions and velocities): certificates "
                            "are derived for x' = v, v' = F(x, v) (docs/certificates.md); got a "

@@ -19,6 +19,13 @@ Rerun
     result of another command -- is refused with :class:`~kinred.errors.InvalidInput`
     (``kinred: error: ...``, exit status 2) and left untouched.
 
+One process at a time: :func:`prepare` takes the folder's lock (:mod:`kinred._lock`, the
+hidden file ``.kinred.lock`` naming the holder's pid, host, start and command line) before it
+looks at, clears or writes anything, and holds it until :func:`record` (or the end of the
+command, however it ends). A second command into a folder in use is refused with one line
+naming the holder (:class:`~kinred.errors.FolderInUse`, exit status 2), without touching the
+folder; the lock of a process that has ended is taken over.
+
 How a folder is recognized: every command writes the marker file ``.kinred-result.json``
 (``{"command": ..., "files": [...]}``) into its folder before its first result and updates
 its list of files when it finishes. A folder is the command's own when its marker names the
@@ -28,13 +35,15 @@ and each of its files matches the command's :class:`Layout` or the marker's list
 
 from __future__ import annotations
 
+import errno
 import fnmatch
 import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InvalidInput
+from .._lock import FolderLock, is_lock_file
+from ..errors import DiskFull, InvalidInput
 from ..io import atomic_write_json
 
 __all__ = ["RESULTS", "MARKER", "Layout", "default_out", "prepare", "record", "LAYOUTS",
@@ -112,7 +121,8 @@ def _is_temporary(name: str) -> bool:
 def _files(out: Path) -> list[str]:
     """Relative ``/``-names of the folder's files (temporary files of a killed writer excluded)."""
     return sorted(p.relative_to(out).as_posix() for p in out.rglob("*")
-                  if (p.is_file() or p.is_symlink()) and not _is_temporary(p.name))
+                  if (p.is_file() or p.is_symlink()) and not _is_temporary(p.name)
+                  and not is_lock_file(p.name))
 
 
 def _read_marker(out: Path) -> dict | None:
@@ -176,18 +186,46 @@ def prepare(out, layout: Layout, *, resume: bool, stream=None) -> Path:
     Returns
     -------
     Path
-        The folder, holding the command's marker and, with ``resume``, the previous result.
+        The folder, holding the command's marker and, with ``resume``, the previous result;
+        this process holds its lock until :func:`record` (or :func:`kinred._lock.release_all`).
 
     Raises
     ------
     InvalidInput
         ``out`` is a file, or holds files kinred does not write for this command, or the
         result of another command.
+    FolderInUse
+        Another process holds the folder (the message names it).
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidInput(f"--out {out}: is a file; give a folder for the results")
-    files = _files(out) if out.is_dir() else []
+    if out.is_dir() and _files(out):
+        _check(out, layout, _files(out))          # refuse a foreign folder before touching it
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        if exc.errno == errno.ENOSPC:
+            raise DiskFull(f"--out {out}: cannot create the folder: no space left on device",
+                           path=str(out)) from None
+        raise InvalidInput(f"--out {out}: cannot create the folder: {exc.strerror}") from None
+    lock = FolderLock(out, what="result folder").acquire()
+    try:
+        _replace(out, layout, resume, stream)
+    except BaseException:
+        lock.release()
+        raise
+    _HELD.setdefault(str(out.resolve()), []).append(lock)
+    return out
+
+
+#: The locks :func:`prepare` took, by folder, until :func:`record` releases them.
+_HELD: dict = {}
+
+
+def _replace(out: Path, layout: Layout, resume: bool, stream) -> None:
+    """The rerun rule, once the folder is ours: keep (resume) or clear it, write the marker."""
+    files = _files(out)
     if files:
         _check(out, layout, files)
         if not resume:
@@ -195,21 +233,20 @@ def prepare(out, layout: Layout, *, resume: bool, stream=None) -> Path:
         if not resume and files != [MARKER]:       # (only a marker: nothing was computed)
             print(f"kinred {layout.command}: replacing the previous run in {out}; use --resume "
                   "to continue it", file=stream or sys.stdout, flush=True)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InvalidInput(f"--out {out}: cannot create the folder: {exc.strerror}") from None
+    out.mkdir(parents=True, exist_ok=True)    # (_clear removes it when it empties it)
     if resume and (out / MARKER).is_file() and _read_marker(out) is not None:
-        return out
+        return
     atomic_write_json(out / MARKER, {"command": layout.command, "files": []})
-    return out
 
 
 def record(out, layout: Layout) -> None:
-    """Write the list of the folder's files into its marker (once the command has finished)."""
+    """Write the list of the folder's files into its marker (once the command has finished)
+    and release the folder's lock taken by :func:`prepare`."""
     out = Path(out)
     files = [f for f in _files(out) if f != MARKER and not f.startswith(("stages/", "store/"))]
     atomic_write_json(out / MARKER, {"command": layout.command, "files": files})
+    for lock in _HELD.pop(str(out.resolve()), []):
+        lock.release()
 
 
 def add_scene_arguments(parser, command: str) -> None:

@@ -2,7 +2,10 @@
 
 Runs the scene's kinetic pipeline (as ``kinred run``, same result folder layout and
 ``--resume`` semantics: a stage store in ``OUT/stages``) with ``[certify] enabled = true``:
-every reduced run is certified (:mod:`kinred.experiments.kinetic_certify`). Prints per k the
+every reduced run is certified (:mod:`kinred.experiments.kinetic_certify`). Stages that
+``kinred run`` computed for the same scene (its folder ``results/run-<scene name>[-smoke]``, or
+``--from-run DIR``) are reused, not recomputed, where their configuration digest matches
+(:class:`kinred.experiments.kinetic_run.SharedStages`); they are listed as ``shared``. Prints per k the
 measured error of the projected run, its certified bound, their worst ratio over ``t ≥ 1``,
 the paper's a-priori bound, and a one-line verdict. Default folder
 ``results/certify-<scene name>``. Exit status 0 when every k is certified and valid, 1 when
@@ -42,6 +45,10 @@ _NORMS = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     _output.add_scene_arguments(parser, "certify")
+    parser.add_argument("--from-run", metavar="DIR",
+                        help="result folder of `kinred run` for this scene whose stages are "
+                             "reused where their configuration digest matches (default: "
+                             "results/run-<scene name>[-smoke])")
     parser.add_argument("--norm", choices=("rms", "max", "both"),
                         help="norms to print (default: the scene's [certify] norm, else both)")
 
@@ -102,9 +109,13 @@ def run(args) -> int:
     layout = _output.LAYOUTS["certify"]
     out = Path(args.out) if args.out else _output.default_out(
         "certify", scene=Path(args.scene).stem, size="smoke" if args.smoke else None)
+    source = Path(args.from_run) if args.from_run else _output.default_out(
+        "run", scene=Path(args.scene).stem, size="smoke" if args.smoke else None)
     _output.prepare(out, layout, resume=args.resume)
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume,
-                             progress=False if args.no_progress else None)
+                             progress=False if args.no_progress else None,
+                             label=f"kinred certify {Path(cfg.source).name}",
+                             share_from=source if source.resolve() != out.resolve() else None)
     _output.record(out, layout)
     print(f"kinred certify: {cfg.title}: d = {cfg.d}, N = {result.n_atoms} atoms, "
           f"{cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}, k ∈ {list(cfg.ks)}")
@@ -123,7 +134,9 @@ def run(args) -> int:
     cost = sum(float(r["cert_time"]) for r in result.per_k.values())
     print("labels: measured (the runs), certified bound (kinred.certify, for the forward-Euler "
           "runs made), a-priori bound (the paper's constants)")
-    print("stages: " + ", ".join(f"{k}: {v}" for k, v in result.stages.items()))
+    print("stages: " + ", ".join(f"{k}: {v}" for k, v in result.stages.items())
+          + (f" (shared: taken from `kinred run` in {source}, same configuration digest)"
+             if "shared" in result.stages.values() else ""))
     print(f"wall time {result.wall_time:.1f} s (certificates: {cost:.1f} s, when their stages "
           "were computed)")
     print(f"report: {out / 'report.html'}")

@@ -84,3 +84,4 @@ class Staged:
 
     def close(self) -> None:
         self.bar.close()
+        self.store.close()

@@ -56,12 +56,12 @@ class Decision:
 def _uncertifiable(cfg, scene, n_atoms: int) -> str:
     """Why the scene cannot be certified ("" if it can)."""
     from ..certify._plan import make_plan
-    from ..pairsum import Dense, Numpy
+    from ..pairsum import is_exact
 
     if cfg.method != "euler":
         return (f"the certificate covers forward Euler only (integrate.method = "
                 f"{cfg.method!r})")
-    if not isinstance(scene.pairsum, (Dense, Numpy)):
+    if not is_exact(scene.pairsum):
         return (f"the pair-sum backend {scene.pairsum!r} is approximate; the certificate "
                 "bounds the exact (dense) scheme")
     try:

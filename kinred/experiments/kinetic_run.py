@@ -53,7 +53,7 @@ from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # no
 from . import kinetic_certify as _cert
 from . import kinetic_report
 
-__all__ = ["LABELS", "NOT_NUMBERS", "RunResult", "run", "write_outputs"]
+__all__ = ["LABELS", "NOT_NUMBERS", "RunResult", "SharedStages", "run", "write_outputs"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -83,7 +83,8 @@ class RunResult:
         atoms); its atoms at T, ``x_final``, ``v_final``, ``weights`` (for the report);
         ``w1_quantization`` with a reference.
     stages : dict
-        ``{stage: "computed" | "loaded"}``.
+        ``{stage: "computed" | "loaded" | "shared"}`` (shared: taken from another run's folder,
+        ``share_from`` of :func:`run`).
     wall_time : float
     out_dir : Path or None
     """
@@ -230,12 +231,84 @@ def _sol_from_arrays(a, cfg: Config, seed):
                            dt=cfg.dt, seed=seed)
 
 
-def _solution(stages, cfg: Config, name: str, atoms, eps):
+def _solution(stages, shared, cfg: Config, name: str, atoms, eps):
     """``(arrays, KineticSolution)`` of stage ``solve`` or ``reference``."""
     seed = member_seed(cfg.seed, _SEEDS[name])
-    a = stages.get_or_compute(name, lambda: _sol_arrays(_solve_stage(cfg, atoms, eps, seed)),
-                              load=_loader(_SOL_KEYS))
+    a = _stage(stages, shared, name,
+               lambda: _sol_arrays(_solve_stage(cfg, atoms, eps, seed)), _SOL_KEYS)
     return a, _sol_from_arrays(a, cfg, seed)
+
+
+def _stage(stages, shared, name: str, compute, keys):
+    """Stage ``name``: loaded (resume), taken from ``shared`` (:class:`SharedStages` or None)
+    or computed."""
+    taken = []
+
+    def share_or_compute():
+        got = None if shared is None else shared.get(name, keys)
+        if got is not None:
+            taken.append(name)
+            return got
+        return compute()
+
+    value = stages.get_or_compute(name, share_or_compute, load=_loader(keys))
+    if taken:
+        stages.status[name] = "shared"
+    return value
+
+
+class SharedStages:
+    """The stages of another result folder of the same scene that a run may take as its own.
+
+    A stage file of ``folder/stages`` is taken when its digest (the array ``__digest__``, see
+    :class:`kinred.io.StageStore`) is that of ``cfg`` up to the ``[certify]`` keys ``enabled``
+    and ``norm`` (which do not change what a solve stage holds, nor a k stage that certified:
+    :func:`kinred.experiments.kinetic_certify.certify_stage` computes the same certificate
+    whether it was asked for or chosen because it is cheap), and, for a k stage, when it holds
+    a certificate. Anything else (absent, damaged, of another configuration, not certified) is
+    computed. Files are read, never written nor locked (they are written atomically).
+    """
+
+    def __init__(self, folder, cfg: Config):
+        import dataclasses
+
+        from ..scenefile import CertifyOptions
+
+        self.folder = Path(folder)
+        self.digests = {dataclasses.replace(cfg, certify=CertifyOptions(e, n, cfg.certify.paper))
+                        .digest() for e in (None, True, False) for n in ("both", "rms", "max")}
+
+    def __repr__(self) -> str:
+        return f"SharedStages({str(self.folder)!r})"
+
+    def get(self, name: str, keys):
+        """The arrays of stage ``name`` if they can be taken (without ``__digest__``), else None."""
+        from ..errors import KinredError
+        from ..io import STAGE_DIGEST, read_npz
+
+        path = self.folder / "stages" / f"{name}.npz"
+        if not path.is_file():
+            return None
+        try:
+            a = read_npz(path, what="stage file", keys=keys + (STAGE_DIGEST,))
+        except KinredError:
+            return None
+        if str(a.pop(STAGE_DIGEST)) not in self.digests:
+            return None
+        if name.startswith("k") and not str(a["cert_note"]).startswith("certified"):
+            return None
+        return a
+
+
+def _check_reference(cfg: Config, n_atoms: int) -> None:
+    """Refuse a reference that is not finer than the run's ``N`` (``eps`` scenes: known only
+    once the solve stage has quantized; ``atoms`` scenes are refused by the loader)."""
+    from ..errors import ConfigError
+
+    if cfg.reference_atoms <= n_atoms:
+        raise ConfigError(f"{cfg.source}: quantize.reference_atoms: the reference must be finer "
+                          f"than the run's quantization, N = {n_atoms} atoms; got "
+                          f"reference_atoms = {cfg.reference_atoms} (valid: > {n_atoms})")
 
 
 def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=None):
@@ -270,33 +343,61 @@ def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=Non
 
 
 def _open_stages(cfg: Config, out_dir, resume: bool):
-    """``(ResultFolder or None, StageStore)``: the result folder and its ``stages/`` store."""
+    """``(ResultFolder or None, StageStore, FolderLock or None)``: the result folder, its
+    ``stages/`` store and the folder's lock (held by this process until the run ends)."""
+    from .._lock import lock_folder
     from ..io import ResultFolder, StageStore
 
     if out_dir is None:
-        return None, StageStore(None, cfg.digest())
+        return None, StageStore(None, cfg.digest()), None
     folder = ResultFolder(out_dir)
-    stages = StageStore(folder / "stages", cfg.digest(), resume=resume,
-                        describe={"config": cfg.to_json()})
-    folder.clean_temporary()
-    return folder, stages
+    lock = lock_folder(folder.path)
+    try:
+        stages = StageStore(folder / "stages", cfg.digest(), resume=resume,
+                            describe={"config": cfg.to_json()})
+        folder.clean_temporary()
+    except BaseException:
+        lock.release()
+        raise
+    return folder, stages, lock
 
 
-def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | None = None) -> RunResult:
-    """Run a scene (see the module docstring); with ``out_dir`` write the result folder."""
+def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | None = None,
+        label: str | None = None, share_from=None) -> RunResult:
+    """Run a scene (see the module docstring); with ``out_dir`` write the result folder.
+
+    The run owns ``out_dir`` while it runs (its lock, :mod:`kinred._lock`: another process is
+    refused with :class:`~kinred.errors.FolderInUse`). ``label`` names the progress bar
+    (default ``"kinred run <scene file>"``). ``share_from``: the result folder of another run
+    of the same scene (``kinred certify`` passes the ``kinred run`` folder) whose stages are
+    taken instead of computed where they are what this run would compute
+    (:class:`SharedStages`); their status is ``"shared"``.
+    """
     if not isinstance(cfg, Config):
         raise InvalidInput(f"cfg must be a kinred.scenefile.Config, got {type(cfg).__name__}")
+    if label is not None and not isinstance(label, str):
+        raise InvalidInput(f"label must be a str or None, got {label!r}")
+    shared = None if share_from is None else SharedStages(share_from, cfg)
     t_start = time.perf_counter()
-    folder, stages = _open_stages(cfg, out_dir, resume)
+    folder, stages, lock = _open_stages(cfg, out_dir, resume)
+    try:
+        return _run(cfg, folder, stages, shared, progress, label, t_start)
+    finally:
+        stages.close()
+        if lock is not None:
+            lock.release()
+
+
+def _run(cfg: Config, folder, stages, shared, progress, label, t_start) -> RunResult:
     names = ["solve"] + (["reference"] if cfg.reference_atoms else []) + [f"k{k}" for k in cfg.ks]
     if progress is None:
         progress = sys.stderr.isatty()
     from tqdm import tqdm
 
-    bar = tqdm(total=len(names), desc=f"kinred run {Path(cfg.source).name}", unit="stage",
-               disable=not progress, file=sys.stderr)
+    bar = tqdm(total=len(names), desc=label or f"kinred run {Path(cfg.source).name}",
+               unit="stage", disable=not progress, file=sys.stderr)
     bar.set_postfix_str("solve")
-    a, sol = _solution(stages, cfg, "solve", cfg.atoms, cfg.eps)
+    a, sol = _solution(stages, shared, cfg, "solve", cfg.atoms, cfg.eps)
     bar.update(1)
     decision = _cert.decide(cfg, sol)
     if cfg.certify.enabled and not decision.on:
@@ -305,16 +406,17 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
     diameter, diameter_lower = _cert.phase_diameter(a["x"], a["v"])
     r = ref = None
     if cfg.reference_atoms:
+        _check_reference(cfg, sol.n_atoms)
         bar.set_postfix_str("reference")
-        r, ref = _solution(stages, cfg, "reference", cfg.reference_atoms, None)
+        r, ref = _solution(stages, shared, cfg, "reference", cfg.reference_atoms, None)
         bar.update(1)
     per_k = {}
     quant = None              # W1(μᴺ(t), μᴺ′(t)) on R^2d: the same for every k, computed once
     for k in cfg.ks:
         bar.set_postfix_str(f"k{k}")
-        per_k[k] = stages.get_or_compute(
-            f"k{k}", lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter, quant),
-            load=_loader(_K_KEYS + (_REF_KEYS if ref is not None else ())))
+        per_k[k] = _stage(stages, shared, f"k{k}",
+                          lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter, quant),
+                          _K_KEYS + (_REF_KEYS if ref is not None else ()))
         quant = per_k[k].get("w1_quantization", quant)
         bar.update(1)
     bar.close()

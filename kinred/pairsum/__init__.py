@@ -14,11 +14,15 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
   non-equispaced FFTs (finufft) for distances in ``k ≤ 3`` dimensions, ``O(N + n^k log n)``
   at a requested relative accuracy ``tol``; kernels declare ``radial_profile()``.
 
+A backend declares whether its pair sums are exact (``exact = True``: Dense, Numpy) or
+approximate (NUFFT, RandomBatch; a backend that does not say is approximate,
+:func:`is_exact`): certificates cover exact backends only.
+
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
-from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form
+from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, is_exact
 from ._select import as_pairsum
 from .dense import Dense, DensePlan
 from .nufft import NUFFT, NUFFTPlan, radial_profile
@@ -27,4 +31,4 @@ from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
-           "radial_profile", "COMPILED_KINDS"]
+           "radial_profile", "COMPILED_KINDS", "is_exact"]

@@ -19,7 +19,7 @@ import numpy as np
 from .._validate import as_int
 from ..errors import InvalidInput
 
-__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form"]
+__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form", "is_exact"]
 
 #: The compiled forms a kernel may declare through ``kernel.compiled_form()``, i.e. the
 #: closed forms ``φ(√q)`` of squared distances ``q`` that the dense backend evaluates inside
@@ -191,11 +191,31 @@ class PairSum(Protocol):
     A backend that draws random numbers declares the attribute ``stochastic = True``:
     :func:`~kinred.integrate.simulate` then passes the run's generator (from its ``seed``) to
     every evaluation; without it a scene without noise is deterministic and gets ``rng=None``.
+
+    A backend that computes the pair sums exactly (up to floating-point round-off, which
+    certificates account for) declares ``exact = True`` (:class:`~kinred.pairsum.Dense`,
+    :class:`~kinred.pairsum.Numpy`); approximate ones (:class:`~kinred.pairsum.NUFFT`,
+    :class:`~kinred.pairsum.RandomBatch`) declare ``exact = False``, and a backend that says
+    nothing counts as approximate (:func:`is_exact`). :func:`kinred.certify.certify` and
+    ``kinred certify`` refuse scenes whose backend is not exact.
     """
 
     def plan(self, scene, n: int, dim: int) -> Any: ...
 
     def evaluate(self, plan, x: np.ndarray, v: np.ndarray | None, rng=None) -> dict: ...
+
+
+def is_exact(backend) -> bool:
+    """Whether the pair-sum ``backend`` declares exact pair sums (``exact = True``); a backend
+    without the attribute is not exact (see :class:`PairSum`).
+
+    Examples
+    --------
+    >>> from kinred.pairsum import Dense, NUFFT, RandomBatch
+    >>> is_exact(Dense()), is_exact(NUFFT()), is_exact(RandomBatch()), is_exact(object())
+    (True, False, False, False)
+    """
+    return getattr(backend, "exact", False) is True
 
 
 def check_plan_args(scene, n, dim) -> tuple[PairTerms, int, int]:

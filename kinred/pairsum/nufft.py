@@ -196,6 +196,9 @@ class NUFFT:
     #: Transforms run in float64.
     precision = "double"
 
+    #: The pair sums are approximate (relative accuracy ``tol``): certificates refuse it.
+    exact = False
+
     def __init__(self, tol: float = 1e-6, max_modes: int = _fastsum.MAX_MODES):
         self.tol = as_float(tol, "tol", low=0.0, high=1.0, low_open=True, high_open=True)
         self.max_modes = as_int(max_modes, "max_modes", low=1)

@@ -162,6 +162,9 @@ class RandomBatch:
     #: It draws from the run's generator: ``simulate`` passes it to every evaluation.
     stochastic = True
 
+    #: Pair sums inside random batches approximate the full ones: certificates refuse it.
+    exact = False
+
     def __init__(self, p: int = 2, block: int | None = None):
         self.p = as_int(p, "p", low=2)
         self.block = BLOCK if block is None else as_int(block, "block", low=1)

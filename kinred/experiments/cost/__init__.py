@@ -108,6 +108,7 @@ def run(cfg: CostConfig | None = None, *, out_dir=None, resume: bool = False,
                 load=_load_study))
             studies[name], times[name] = doc["result"], doc["wall_time_s"]
             bar.update(max(0, start + study.n_units(cfg.configs[name]) - bar.n))
+    stages.close()
     result = CostResult(cfg, studies, headline(studies, cfg), machine_info(),
                         time.perf_counter() - t0, times, dict(stages.status))
     if out_dir is not None:
