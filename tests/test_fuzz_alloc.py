@@ -12,15 +12,14 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from kinred import (Alignment, CuckerSmale, Scene, TensorProduct, Uniform, jl_matrix, quantize,
-                    simulate)
+from kinred import Alignment, CuckerSmale, Scene, TensorProduct, Uniform, jl_matrix, simulate
 from kinred._validate import DEFAULT_MAX_BYTES, check_alloc, max_bytes_limit
 from kinred.ensemble import run_ensemble
 from kinred.errors import InvalidInput, TooLarge
 from kinred.integrate import SaveAt
 from kinred.integrate._save import GRID_POINT_BYTES, OBS_VALUE_BYTES
 from kinred.kinetic import lift, solve
-from kinred.quantize import _size
+from kinred.quantize import _size, quantize
 from kinred.recovery import basis_pursuit
 
 
