@@ -43,3 +43,107 @@ def test_namesake_functions_are_reached_through_their_module():
     q = kinred.quantize.quantize(TensorProduct([Uniform(0, 1)] * 2), atoms=9)
     assert q.n_atoms == 9 and isinstance(q, kinred.quantize.Quantization)
     assert callable(kinred.certify.certify) and kinred.certify.Certificate is Certificate
+
+
+# ------------------------------------------------------------ flags and numbers (item 5)
+def _cert(dt=0.1, **kw):
+    rng = np.random.default_rng(3)
+    x0, v0 = rng.normal(size=(10, 6)), rng.normal(size=(10, 6))
+    M = rng.normal(0, 1 / np.sqrt(2), (2, 6))
+    return certify(Scene([Alignment(CuckerSmale(1.0, 0.4))]), M, x0, v0, t_span=(0, 2),
+                   dt=dt, **kw)
+
+
+def test_certificate_flags_and_numbers_are_properties():
+    from dataclasses import replace
+
+    c = _cert(save=SaveAt(every=5))
+    assert c.valid is True
+    bad = replace(c, bound=c.error * 0.5)          # a bound below the measured error
+    assert bool(bad.valid) is False and bad.valid is False
+    assert isinstance(c.ratio, np.ndarray) and c.ratio.shape == c.t.shape
+    sel = c.error > 0
+    np.testing.assert_array_equal(c.ratio[sel], c.bound[sel] / c.error[sel])
+    np.testing.assert_array_equal(c.ratio_max[sel], c.bound_max[sel] / c.error_max[sel])
+    assert np.isnan(replace(c, error=0 * c.error).ratio).all()          # no error: no ratio
+    assert c.worst_ratio_after(1.0) == float(np.max(c.ratio[c.t >= 1.0]))
+
+
+def test_worst_ratio_after_names_a_bad_norm():
+    from kinred.errors import InvalidInput
+
+    with pytest.raises(InvalidInput, match="norm"):
+        _cert(save=SaveAt(every=10)).worst_ratio_after(1.0, "l1")
+
+
+# ------------------------------------------------------------ the final state (item 6)
+def _run(save=None, method="euler", x_shift=0.0):
+    from kinred.integrate import simulate
+
+    rng = np.random.default_rng(5)
+    x0, v0 = rng.normal(size=(15, 4)) + x_shift, rng.normal(size=(15, 4))
+    return simulate(Scene([Alignment(CuckerSmale(1.0, 0.4))]), x0, v0, (0.0, 1.0), 0.05,
+                    method=method, save=save)
+
+
+@pytest.mark.parametrize("method,x_shift", [("euler", 0.0), ("euler", 1e3), ("rk45", 0.0)])
+def test_simulate_keeps_the_final_state_by_default(method, x_shift):
+    tr = _run(method=method, x_shift=x_shift)
+    full = _run(SaveAt(states=True), method=method, x_shift=x_shift)
+    assert tr.x.shape == tr.v.shape == (1, 15, 4) and tr.t_states.tolist() == [1.0]
+    np.testing.assert_array_equal(tr.x[-1], full.x[-1])
+    np.testing.assert_array_equal(tr.v[-1], full.v[-1])
+    np.testing.assert_array_equal(full.t_states, full.t)
+    for k in tr.observables:                       # the rest of the run is unchanged
+        np.testing.assert_array_equal(tr.observables[k], full.observables[k])
+    assert not np.shares_memory(tr.x, tr.v)
+
+
+def test_first_order_and_one_state_requests():
+    from kinred.dynamics import Aggregation, Morse
+    from kinred.integrate import simulate
+
+    x0 = np.random.default_rng(6).normal(size=(8, 2))
+    sc = Scene([Aggregation(Morse())])
+    tr, full = (simulate(sc, x0, None, (0.0, 1.0), 0.1, save=s)
+                for s in (None, SaveAt(states=True)))
+    assert tr.v is None and tr.x.shape == (1, 8, 2)
+    np.testing.assert_array_equal(tr.x[-1], full.x[-1])
+    x_only = _run(SaveAt(every=5, states="x"))                  # kept as asked
+    assert x_only.v is None and x_only.x.shape == (len(x_only.t), 15, 4)
+
+
+# ------------------------------------------------------------------- reprs (item 7)
+def test_certificate_repr_is_short_and_shows_headline_numbers():
+    c = _cert(dt=0.004)                                           # 501 saved steps
+    assert len(c.t) == 501
+    text = repr(c)
+    assert len(text.splitlines()) <= 8 and len(text) < 800
+    assert "valid=True" in text and "N=10, d=6, k=2" in text and "n_steps=500" in text
+    assert f"bound {c.bound[-1]:.4g}" in text and f"error {c.error[-1]:.4g}" in text
+    assert f"worst_ratio_after(1.0)={c.worst_ratio_after(1.0):.4g}" in text
+
+
+def test_certificate_summary_tabulates_the_series():
+    c = _cert()
+    lines = c.summary(rows=4).splitlines()
+    assert lines[1].split() == ["t", "error", "bound", "ratio", "error_max", "bound_max",
+                                "ratio_max", "w1_coupling", "w1_bound", "paper_bound"]
+    rows = [list(map(float, ln.split())) for ln in lines[2:6]]
+    assert [r[0] for r in rows] == pytest.approx([c.t[0], c.t[7], c.t[13], c.t[20]], rel=1e-3)
+    assert rows[-1][1:3] == pytest.approx([c.error[-1], c.bound[-1]], rel=1e-3)
+    assert lines[-1] == c.note
+
+
+def test_trajectory_repr_is_short_at_any_length():
+    from kinred.integrate import simulate
+
+    rng = np.random.default_rng(0)
+    x0, v0 = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    tr = simulate(Scene([Alignment()]), x0, v0, (0.0, 20.0), 0.01, save=SaveAt(states=True))
+    text = repr(tr)
+    assert len(tr.t) == 2001 and len(text.splitlines()) <= 8 and len(text) < 800
+    assert "(2001, 40, 3)" in text and "n_steps=2000" in text and "'gamma': <(2001,)" in text
+    lines = tr.summary(rows=5).splitlines()
+    assert lines[0].split() == ["t", "gamma", "lambda"] and len(lines) == 6
+    assert float(lines[-1].split()[1]) == pytest.approx(tr.observables["gamma"][-1], rel=1e-3)

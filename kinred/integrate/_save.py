@@ -222,6 +222,10 @@ class Recorder:
         want_v = save.states in (True, "v") and scene.order == 2
         self.X = np.empty((n_save, *shape)) if want_x else None
         self.V = np.empty((n_save, *shape)) if want_v else None
+        # no states requested: keep the final one (Diffrax's default, SaveAt(t1=True)), one
+        # copy at the last save point and nothing per step
+        self.last = n_save - 1 if not isinstance(save.states, str) and not save.states else -1
+        self.final = None
 
     def __call__(self, j, t, x, v):
         """Record save point ``j`` at time ``t`` from the working state ``(x, v)``."""
@@ -232,6 +236,18 @@ class Recorder:
             self.X[j] = xt
         if self.V is not None:
             self.V[j] = v
+        if j == self.last:
+            self.final = ((xt.copy() if xt is x else xt)[None],
+                          None if v is None else v.copy()[None])
+
+    def states(self, times: np.ndarray) -> tuple:
+        """``(x, v, t_states)``: the recorded states and their times (the save times), or,
+        when none were requested, the final state ``(1, N, d)`` at ``times[-1]``."""
+        if self.final is not None:
+            return self.final[0], self.final[1], np.asarray(times[-1:], dtype=float)
+        if self.X is None and self.V is None:
+            return None, None, np.empty(0)
+        return self.X, self.V, np.asarray(times, dtype=float)
 
     def observables(self) -> Mapping[str, np.ndarray]:
         """The recorded observables, ``(T, ...)`` arrays in a read-only mapping."""
