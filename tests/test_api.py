@@ -147,3 +147,74 @@ def test_trajectory_repr_is_short_at_any_length():
     lines = tr.summary(rows=5).splitlines()
     assert lines[0].split() == ["t", "gamma", "lambda"] and len(lines) == 6
     assert float(lines[-1].split()[1]) == pytest.approx(tr.observables["gamma"][-1], rel=1e-3)
+
+
+# ------------------------------------------------------------ integrator aliases (item 11)
+ALIAS_CASES = [("dopri5", "rk45"), ("DP45", "rk45"), ("RK45", "rk45"), ("Dormand-Prince", "rk45"),
+               ("ode45", "rk45"), ("bs23", "rk23"), ("RK23", "rk23"), ("Bosh3", "rk23"),
+               ("Bogacki_Shampine", "rk23"), ("Heun", "heun"), ("RK4", "rk4"),
+               ("forward-euler", "euler"), ("Euler", "euler")]
+
+
+@pytest.mark.parametrize("alias,name", ALIAS_CASES)
+def test_integrator_aliases_run_the_named_integrator(alias, name):
+    from kinred.integrate import method_name
+
+    assert method_name(alias) == name
+    a, b = _run(SaveAt(every=4, states=True), method=alias), _run(SaveAt(every=4, states=True),
+                                                                   method=name)
+    assert a.method == name and a.n_steps == b.n_steps and a.n_rejected == b.n_rejected
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.v, b.v)
+
+
+def test_scipy_names_give_scipy_accuracy():
+    """``method="RK45"`` is the same Dormand–Prince pair as SciPy's: both reach the
+    closed-form solution of a linear alignment to their tolerances."""
+    from kinred.dynamics import Quadratic
+    from kinred.integrate import simulate
+
+    rng = np.random.default_rng(2)
+    x0, v0 = rng.normal(size=(5, 2)), rng.normal(size=(5, 2))
+    sc = Scene([Alignment(Quadratic(1.0))])                 # v' = -(v - v̄): v̄ + e^{-t}(v0 - v̄)
+    vb = v0.mean(axis=0)
+    for m in ("RK45", "RK23", "dopri5", "bs23"):
+        tr = simulate(sc, x0, v0, (0.0, 2.0), 0.1, method=m, rtol=1e-8, atol=1e-10,
+                      save=SaveAt(every=10**6))
+        np.testing.assert_allclose(tr.v[-1], vb + np.exp(-2.0) * (v0 - vb), rtol=0, atol=1e-6)
+
+
+def test_scene_file_accepts_aliases_and_unknown_names_list_them():
+    from kinred.errors import ConfigError, InvalidInput
+    from kinred.integrate import simulate
+    from kinred.scenefile import SMALL_SCENE, config_from_dict
+
+    for alias, name in [("dopri5", "rk45"), ("RK23", "rk23"), ("Heun", "heun")]:
+        cfg = config_from_dict({**SMALL_SCENE, "integrate": {**SMALL_SCENE["integrate"],
+                                                              "method": alias}})
+        assert cfg.method == name
+    with pytest.raises(ConfigError, match="integrate.method: must be one of euler, heun"):
+        config_from_dict({**SMALL_SCENE, "integrate": {**SMALL_SCENE["integrate"],
+                                                        "method": "dop853"}})
+    with pytest.raises(InvalidInput, match=r"method must be one of 'euler'.*; got 'dop853' "
+                                           r"\(or an alias.*rk45 = .*dopri5.*rk23 = .*bs23"):
+        simulate(Scene([Alignment()]), np.zeros((3, 2)), np.ones((3, 2)), method="dop853")
+
+
+def test_registered_aliases_are_checked_and_removed_with_their_integrator():
+    from kinred.errors import InvalidInput
+    from kinred.integrate import ALIASES, RK4, ExplicitRK, method_name, register_solver
+    from kinred.integrate import unregister_solver
+
+    with pytest.raises(InvalidInput, match="'DOPRI5' would name two integrators"):
+        register_solver("toy_rk", lambda: ExplicitRK(RK4), aliases=("DOPRI5",))
+    with pytest.raises(InvalidInput, match="aliases must be"):
+        register_solver("toy_rk", lambda: ExplicitRK(RK4), aliases=(1,))
+    register_solver("toy_rk", lambda: ExplicitRK(RK4), aliases=("toy-4",))
+    try:
+        assert method_name("TOY_4") == "toy_rk" and ALIASES["toy-4"] == "toy_rk"
+    finally:
+        unregister_solver("toy_rk")
+    assert "toy-4" not in ALIASES
+    with pytest.raises(InvalidInput, match="got 'toy-4'"):
+        method_name("toy-4")

@@ -18,13 +18,13 @@ import numpy as np
 from .. import observables as _obs
 from .._repr import brief, result_repr, sample_rows, table
 from .._rng import as_generator
-from .._validate import as_choice, as_float, as_int, as_span
+from .._validate import as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
 from ._observers import Progress, as_observers, state_view
-from ._registry import SOLVERS
+from ._registry import SOLVERS, method_name
 from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
                     save_points)
 from ._solvers import VectorField
@@ -209,7 +209,9 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         Step (fixed-step methods; ``(t1 − t0)/dt`` must be an integer) or the initial step
         and save-grid unit of adaptive methods.
     method : str
-        A name in :data:`SOLVERS` (:data:`METHODS`: the built-in ones). Scenes with noise
+        A name in :data:`SOLVERS` (:data:`METHODS`: the built-in ones) or an alias of one
+        (:data:`ALIASES`: SciPy's ``"RK45"``/``"RK23"``, ``"dopri5"``, ``"bs23"``, ...; case,
+        ``-`` and ``_`` ignored); :attr:`Trajectory.method` is the name. Scenes with noise
         require a stochastic method (``"euler_maruyama"``).
     save : SaveAt, optional
         Default ``SaveAt()`` (observables every step, no states).
@@ -345,7 +347,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     if not (t1 - t0) / dt <= 2.0**53:  # beyond it t0 + n·dt is no grid (and may be inf)
         raise InvalidInput(f"dt must be at least (t1 - t0)/2**53 = {(t1 - t0) / 2.0**53:.3g} "
                            f"for t_span = ({t0!r}, {t1!r}), got dt = {dt!r}")
-    method = as_choice(method, "method", SOLVERS)
+    method = method_name(method)
     spec = SOLVERS[method]
     if scene.stochastic and not spec.stochastic:
         noisy = " or ".join(f"method={m!r}" for m, s in SOLVERS.items() if s.stochastic)
