@@ -218,3 +218,53 @@ def test_registered_aliases_are_checked_and_removed_with_their_integrator():
     assert "toy-4" not in ALIASES
     with pytest.raises(InvalidInput, match="got 'toy-4'"):
         method_name("toy-4")
+
+
+# ---------------------------------------------- finite, true messages (item 12, two parts)
+@pytest.mark.parametrize("max_modes,scale", [(1, 1.0), (2**20, 1e6)])
+def test_nufft_too_large_names_a_finite_count(max_modes, scale):
+    from kinred.errors import TooLarge
+    from kinred.pairsum import NUFFT
+
+    rng = np.random.default_rng(0)
+    x, v = rng.normal(size=(40, 3)) * scale, rng.normal(size=(40, 3))
+    sc = Scene([Alignment(CuckerSmale(1.0, 0.5))], pairsum=NUFFT(max_modes=max_modes))
+    with pytest.raises(TooLarge) as info:
+        sc.rhs(x, v)
+    msg = str(info.value)
+    assert "inf" not in msg.replace("Fourier", "") and "nan" not in msg
+    assert f"needs more than max_modes={max_modes} Fourier modes for tol=1e-06" in msg
+    assert " 0 MB" not in msg
+
+
+def test_measure_file_widths_that_underflow_are_named():
+    from kinred.errors import ConfigError
+    from kinred.measures._file import measure_from_dict
+
+    def coords(decay, repeat, **kw):
+        return {"name": "u", "coordinate": [{"dist": "uniform", "repeat": repeat, "decay": decay,
+                                             "params": {"loc": 0.0, "scale": 1.0}, **kw}]}
+
+    with pytest.raises(ConfigError, match=r"coordinate\[0\]\.decay: the widths underflow: .* "
+                                          r"from copy r = 2 on .*≈ 10\^-400") as info:
+        measure_from_dict(coords(1e-200, 3))
+    assert "nan" not in str(info.value) and "unbounded" not in str(info.value)
+    with pytest.raises(ConfigError, match=r"from copy r = 1022 on \(decay = 0.5; the last, "
+                                          r"r = 1099"):
+        measure_from_dict(coords(0.5, 1100))
+    with pytest.raises(ConfigError, match="widths underflow"):     # a support's width too
+        measure_from_dict(coords(1e-160, 3, support=[0.0, 1e-10]))
+    mu = measure_from_dict(coords(0.5, 1000))                       # 2^-999 is still normal
+    assert mu.support_widths()[-1] == 0.5**999
+
+
+def test_a_law_without_support_is_named_as_such():
+    from scipy import stats
+
+    from kinred.errors import InvalidInput
+    from kinred.measures import Univariate
+
+    with pytest.raises(InvalidInput, match=r"uniform has no support: .*\(nan, nan\); its "
+                                           r"parameters are invalid") as info:
+        Univariate(stats.uniform(0.0, 0.0))
+    assert "unbounded" not in str(info.value)
