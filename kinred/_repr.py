@@ -14,6 +14,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ._validate import fmt_count
+
 __all__ = ["brief", "result_repr", "table", "sample_rows"]
 
 _WIDTH = 96
@@ -40,11 +42,19 @@ def _array(a: np.ndarray) -> str:
 
 def brief(value) -> str:
     """One short item for ``value``: arrays as shape, dtype and range; mappings by key;
-    floats with 4 significant digits; long text cut."""
+    floats with 4 significant digits; long text cut.
+
+    Examples
+    --------
+    >>> brief(np.arange(6.0).reshape(2, 3)), brief(np.array([0.5, 2.0])), brief(10**400)
+    ('<(2, 3) float64 in [0, 5]>', '[0.5, 2]', '1.000e+400')
+    """
     if isinstance(value, np.ndarray):
         return _array(value)
     if isinstance(value, (float, np.floating)):
         return _num(value)
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return fmt_count(value)                   # any size, exact up to 12 digits
     if isinstance(value, Mapping):
         items = [f"{k!r}: {brief(v)}" for k, v in list(value.items())[:8]]
         more = f", … {len(value) - 8} more" if len(value) > 8 else ""

@@ -268,3 +268,30 @@ def test_a_law_without_support_is_named_as_such():
                                            r"parameters are invalid") as info:
         Univariate(stats.uniform(0.0, 0.0))
     assert "unbounded" not in str(info.value)
+
+
+# ------------------------------------------------------- the other results' reprs (item 7)
+def test_result_reprs_stay_short():
+    from kinred.ensemble import run_ensemble
+    from kinred.kinetic import compare, reduce, solve, theorem_bound
+    from kinred.measures import TensorProduct, Uniform
+    from kinred.projection import trajectory_distortion
+
+    sc = Scene([Alignment(CuckerSmale(1.0, 0.4))])
+    sol = solve(sc, TensorProduct([Uniform(0, 1)] * 4), t_span=(0, 1), dt=0.05, eps=0.45)
+    M = np.random.default_rng(1).normal(size=(1, 2))
+    red = reduce(sol, M=M)
+    ens = run_ensemble(lambda p, ss: {"a": np.zeros(100) + p["i"]},
+                       [dict(i=i) for i in range(30)], master_seed=0)
+    found = {"KineticSolution": (sol, f"x=<({len(sol.t)}, {sol.n_atoms}, 2) float64"),
+             "ReducedSolution": (red, f"y=<({len(sol.t)}, {sol.n_atoms}, 1) float64"),
+             "Comparison": (compare(sol, red), f"w1=<({len(sol.t)},) float64"),
+             "TheoremBound": (theorem_bound(sol, red), f"bound=<({len(sol.t)},) float64"),
+             "EnsembleResult": (ens, "results=<tuple of 30>"),
+             "TrajectoryDistortionResult": (trajectory_distortion(M, sol.x[:, :300]),
+                                            f"eps_t=<({len(sol.t)},) float64")}
+    assert sol.n_atoms >= 400
+    for name, (obj, shape) in found.items():
+        text = repr(obj)
+        assert text.startswith(name + "(") and shape in text, (name, text)
+        assert len(text.splitlines()) <= 16 and len(text) < 1600, (name, len(text))
