@@ -113,6 +113,21 @@ def test_first_order_and_one_state_requests():
     assert x_only.v is None and x_only.x.shape == (len(x_only.t), 15, 4)
 
 
+def test_the_final_state_is_priced_before_the_run(monkeypatch):
+    from kinred.errors import TooLarge
+    from kinred.integrate import simulate
+    from kinred.integrate._save import GRID_POINT_BYTES, OBS_VALUE_BYTES
+
+    sc, x = Scene([Alignment(CuckerSmale())]), np.random.default_rng(0).uniform(size=(40, 3))
+    save = SaveAt(every=2, observables=("gamma",))              # 10 steps: 5 + 2 points
+    need = 7 * (GRID_POINT_BYTES + OBS_VALUE_BYTES + 16 * 3) + 2 * 8 * 40 * 3
+    monkeypatch.setenv("KINRED_MAX_BYTES", str(need))
+    assert simulate(sc, x, x, (0.0, 1.0), 0.1, save=save).x.shape == (1, 40, 3)
+    monkeypatch.setenv("KINRED_MAX_BYTES", str(need - 1))
+    with pytest.raises(TooLarge, match=r"the final state \(N, d\) = \(40, 3\) x 2"):
+        simulate(sc, x, x, (0.0, 1.0), 0.1, save=save)
+
+
 # ------------------------------------------------------------------- reprs (item 7)
 def test_certificate_repr_is_short_and_shows_headline_numbers():
     c = _cert(dt=0.004)                                           # 501 saved steps

@@ -134,14 +134,17 @@ def check_save_size(save: SaveAt, n_save: int, shape: tuple, order: int, n_obs: 
                     call: str, hint: str = _SAVE_HINT) -> None:
     """:func:`~kinred._validate.check_alloc` of what a run records: the save grid, the
     observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d`` entries) and
-    the states ``(T, N, d)`` requested by ``save.states``; ``call`` names the run's
+    the states ``(T, N, d)`` requested by ``save.states`` (none requested: the final state); ``call`` names the run's
     arguments in the message."""
     n, d = shape
     n_states = int(save.states in (True, "x")) + int(save.states in (True, "v") and order == 2)
     per_point = GRID_POINT_BYTES + n_obs * (OBS_VALUE_BYTES + 16 * d) + 8 * n * d * n_states
     states = f", states (T, N, d) = ({fmt_count(n_save)}, {n}, {d}) x {n_states}" if n_states else ""
-    check_alloc(n_save * per_point, f"{call}: recording {fmt_count(n_save)} save points", hint,
-                detail=f" ({n_obs} observables{states})")
+    final = 0 if isinstance(save.states, str) or save.states else 8 * n * d * order
+    if final:                                      # the final state kept by default
+        states = f", the final state (N, d) = ({n}, {d}) x {order}"
+    check_alloc(n_save * per_point + final, f"{call}: recording {fmt_count(n_save)} save points",
+                hint, detail=f" ({n_obs} observables{states})")
 
 
 class SaveGrid(NamedTuple):
