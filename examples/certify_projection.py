@@ -60,8 +60,8 @@ print(f"{'t':>6} {'error (' + cert.labels['error'] + ')':>20} "
 for j in range(2, len(cert.t), 2):
     print(f"{cert.t[j]:6.2f} {cert.error[j]:20.3e} {cert.bound[j]:26.3e} "
           f"{cert.bound[j] / cert.error[j]:6.2f} {cert.paper_bound[j]:26.3e}")
-print(f"valid: {cert.valid()}; worst ratio over t >= 1: {cert.worst_ratio('rms', 1.0):.2f} "
-      f"(max over agents: {cert.worst_ratio('max', 1.0):.2f})")
+print(f"valid: {cert.valid}; worst ratio over t >= 1: {cert.worst_ratio_after(1.0):.2f} "
+      f"(max over agents: {cert.worst_ratio_after(1.0, 'max'):.2f})")
 
 # %%
 # Plot

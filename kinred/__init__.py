@@ -7,7 +7,10 @@ of the paper (Fornasier, Haškovec, Vybíral) maps onto the packages::
        |                     |                                 +--> W1 / errors / bounds
        +--push(M)--> M#mu    +--project(M)--> simulate in R^k --+--> recover (l1)
 
-See ``docs/`` and ``docs/architecture.md``.
+Naming rule: ``kinred.X`` for a subpackage ``X`` is always that module (``import kinred.X``
+and ``kinred.X`` agree); a function is re-exported here only when its name is no subpackage's,
+so a subpackage's namesake function is reached through it: ``kinred.quantize.quantize``,
+``kinred.certify.certify``. See ``docs/`` and ``docs/architecture.md``.
 """
 
 from ._version import __version__
@@ -33,7 +36,7 @@ from .measures import (
     Univariate,
     load_measure,
 )
-from .quantize import Budget, Quantization, budget, paper_recipe, quantize, quantize_1d
+from .quantize import Budget, Quantization, budget, paper_recipe, quantize_1d
 from .distance import SlicedW1Result, W1Result, sliced_w1, w1
 from .projection import (
     DenseProjection,
@@ -65,8 +68,7 @@ from .observables import (above_floor, centre, flocking_verdict, gamma, gamma_fl
                           mean_velocity, relative_error)
 from .ensemble import EnsembleResult, grid, run_ensemble
 from .io import ResultFolder
-from . import kinetic
-from . import certify
+from . import certify, kinetic, quantize  # subpackages: the modules, never a function
 
 __all__ = [
     "__version__",
@@ -76,7 +78,7 @@ __all__ = [
     # measures and quantization
     "Measure", "Univariate", "Uniform", "Dirac", "Empirical1D", "TensorProduct", "Mixture",
     "PushForward", "Atomic", "load_measure",
-    "quantize", "quantize_1d", "budget", "paper_recipe", "Quantization", "Budget",
+    "quantize_1d", "budget", "paper_recipe", "Quantization", "Budget",
     # distances
     "w1", "sliced_w1", "W1Result", "SlicedW1Result",
     # projections
@@ -91,8 +93,10 @@ __all__ = [
     "gamma_floor", "above_floor",
     # ensembles and results
     "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
-    # kinetic solutions: kinred.kinetic.solve / reduce / compare / theorem_bound
-    "kinetic",
-    # certified error bounds of projected runs: kinred.certify.certify / Certificate
+    # subpackages whose name is also their main function (the module wins, see the docstring):
+    # kinred.quantize.quantize, kinred.certify.certify / Certificate,
+    # kinred.kinetic.solve / reduce / compare / theorem_bound
+    "quantize",
     "certify",
+    "kinetic",
 ]

@@ -87,6 +87,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ._repr import result_repr
 from ._rng import member_seed
 from ._validate import as_bool, as_choice, as_int, check_alloc, fmt_bytes
 from . import _parallel
@@ -439,6 +440,8 @@ class EnsembleResult:
         Path of the results store.
     config_hash : str
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     members: tuple
     results: tuple

@@ -88,6 +88,8 @@ class Key:
         One line for the reference.
     low, high : float, optional
         Valid range (closed unless ``low_open`` / ``high_open``).
+    normalize : callable, optional
+        Applied to the value before the choices are checked (e.g. an alias to its name).
     choices : tuple or callable, optional
         Valid values, or a function returning them (a live registry).
     shown_default, shown_choices : str, optional
@@ -105,6 +107,7 @@ class Key:
     choices: tuple | Callable[[], tuple] | None = None
     shown_default: str | None = None
     shown_choices: str | None = None
+    normalize: Callable[[Any], Any] | None = None
 
     def __post_init__(self):
         if self.type not in _TYPES:
@@ -144,6 +147,8 @@ class Key:
                 raise ConfigError(f"{source}: {where}: must be finite, got {_short(value)}")
         if self.type in ("number", "integer") and not self._in_range(value):
             raise ConfigError(f"{source}: {where}: must be {self.range_text()}, got {value!r}")
+        if self.normalize is not None:
+            value = self.normalize(value)
         choices = self.valid_choices()
         if choices is not None and value not in choices:
             raise ConfigError(f"{source}: {where}: must be {_one_of(choices)}, got {_short(value)}")
@@ -443,6 +448,16 @@ def _deterministic_methods() -> tuple:
     return tuple(m for m, spec in SOLVERS.items() if not spec.stochastic)  # scene files: no noise
 
 
+def _method_alias(value):
+    """The registered name of an integrator alias (``"RK45"``, ``"dopri5"``), else ``value``."""
+    from .integrate import method_name
+
+    try:
+        return method_name(value)
+    except InvalidInput:
+        return value
+
+
 def _projection_kinds() -> tuple:
     from .projection import KINDS
 
@@ -504,7 +519,9 @@ TABLES: dict[str, tuple] = {
     "integrate": (
         Key("method", "string", "euler", "the integrator", choices=_deterministic_methods,
             shown_choices="a deterministic integrator of kinred.integrate.SOLVERS: euler (the "
-                          "paper's), heun, rk4, rk45, rk23 or a registered one"),
+                          "paper's), heun, rk4, rk45, rk23 or a registered one, or an alias "
+                          "of kinred.integrate.ALIASES (dopri5, RK45, bs23, RK23, ...)",
+            normalize=_method_alias),
         Key("dt", "number", REQUIRED, "time step", low=0.0, low_open=True),
         Key("t_final", "number", REQUIRED, "final time, a multiple of dt", low=0.0,
             low_open=True),

@@ -22,12 +22,13 @@ from hypothesis.extra import numpy as hnp
 
 from kinred import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift, Field,
                     Morse, Noise, Quadratic, Scene, SelfPropulsion, TensorProduct, Uniform,
-                    budget, jl_matrix, quantize, simulate, w1)
+                    budget, jl_matrix, simulate, w1)
 from kinred.ensemble import run_ensemble
 from kinred.errors import InvalidInput, KinredError, TooLarge
 from kinred.integrate import SaveAt
 from kinred.kinetic import solve
 from kinred.measures import Atomic
+from kinred.quantize import quantize
 from kinred.recovery import basis_pursuit
 
 #: Deterministic (derandomized, no example database): the same examples on every run.

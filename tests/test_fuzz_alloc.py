@@ -12,15 +12,14 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from kinred import (Alignment, CuckerSmale, Scene, TensorProduct, Uniform, jl_matrix, quantize,
-                    simulate)
+from kinred import Alignment, CuckerSmale, Scene, TensorProduct, Uniform, jl_matrix, simulate
 from kinred._validate import DEFAULT_MAX_BYTES, check_alloc, max_bytes_limit
 from kinred.ensemble import run_ensemble
 from kinred.errors import InvalidInput, TooLarge
 from kinred.integrate import SaveAt
 from kinred.integrate._save import GRID_POINT_BYTES, OBS_VALUE_BYTES
 from kinred.kinetic import lift, solve
-from kinred.quantize import _size
+from kinred.quantize import _size, quantize
 from kinred.recovery import basis_pursuit
 
 
@@ -101,7 +100,8 @@ def test_simulate_refuses_a_huge_step_count_before_building_the_grid():
     sc = Scene([Alignment(CuckerSmale())])
     x = np.zeros((3, 2))
     msg = refused(simulate, sc, x, x, (0.0, 1e12), 0.01)                # 1e14 saved steps
-    assert "recording 1.000e+14 save points would allocate 34.1 PiB (2 observables)" in msg
+    assert ("recording 1.000e+14 save points would allocate 34.1 PiB (2 observables, the final "
+            "state (N, d) = (3, 2) x 2)") in msg
     with pytest.raises(InvalidInput, match=r"dt must be at least \(t1 - t0\)/2\*\*53"):
         simulate(sc, x, x, (0.0, 1.0), 1e-320)                           # was OverflowError
     with pytest.raises(InvalidInput, match="t_span must have a finite length"):

@@ -61,12 +61,14 @@ def test_first_order_scene_and_unweighted():
     assert ds.attrs["seed"] == "None" and "weighted" not in ds.attrs["scene"]
 
 
-def test_observables_only_run():
+def test_default_run_exports_its_observables_and_final_state():
     rng = np.random.default_rng(0)
     tr = simulate(Scene([Alignment()]), rng.random((5, 2)), rng.random((5, 2)), (0.0, 1.0), 0.5)
     ds = tr.to_xarray()
-    assert set(ds.data_vars) == set(tr.observables) and "agent" not in ds.dims
-    assert ds["gamma"].dims == ("time",)
+    assert set(ds.data_vars) == set(tr.observables) | {"x", "v"}
+    assert ds["gamma"].dims == ("time",) and ds["x"].dims == ("state_time", "agent", "coordinate")
+    assert ds["state_time"].values.tolist() == [1.0] and ds.sizes["time"] == 3
+    assert np.array_equal(ds["v"].values, tr.v) and np.array_equal(ds["x"].values[0], tr.x[-1])
 
 
 def test_missing_xarray_is_a_clear_kinred_error(monkeypatch):

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 import time
 import types
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Mapping
 
 import numpy as np
 
-from .._validate import as_choice, as_float, as_span
+from .._repr import result_repr, sample_rows, table
+from .._validate import as_choice, as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
 from ..integrate import METHODS, ConstantStep, SaveAt, simulate
@@ -36,7 +37,7 @@ LABELS = types.MappingProxyType({
 })
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Certificate:
     r"""Result of :func:`certify`: errors of a projected run, measured and certified.
 
@@ -108,27 +109,71 @@ class Certificate:
     labels: Mapping = field(default_factory=lambda: LABELS)
     note: str = ""
 
-    def ratio(self, norm: str = "rms", t_min: float = 0.0) -> np.ndarray:
-        """``bound / error`` (``"rms"``) or ``bound_max / error_max`` (``"max"``) at the saved
-        times ``t >= t_min`` (NaN where the error is 0)."""
-        norm = as_choice(norm, "norm", ("rms", "max"))
-        t_min = as_float(t_min, "t_min")
-        b, e = (self.bound, self.error) if norm == "rms" else (self.bound_max, self.error_max)
-        sel = self.t >= t_min
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(e[sel] > 0, b[sel] / e[sel], np.nan)
+    @property
+    def ratio(self) -> np.ndarray:
+        """``bound / error`` at every saved time, ``(T,)`` (NaN where the error is 0)."""
+        return _ratio(self.bound, self.error)
 
-    def worst_ratio(self, norm: str = "rms", t_min: float = 1.0) -> float:
-        """Largest ``bound / error`` over saved times ``t >= t_min`` (NaN if none)."""
-        r = self.ratio(norm, t_min)
+    @property
+    def ratio_max(self) -> np.ndarray:
+        """``bound_max / error_max`` at every saved time, ``(T,)`` (NaN where the error is 0)."""
+        return _ratio(self.bound_max, self.error_max)
+
+    def worst_ratio_after(self, t_min: float = 1.0, norm: str = "rms") -> float:
+        """Largest ``bound / error`` (``norm="rms"``) or ``bound_max / error_max``
+        (``"max"``) over the saved times ``t >= t_min`` (NaN if there is none with a nonzero
+        error). Early times are left out by default: there the error is still tiny and the
+        ratio says little."""
+        t_min = as_float(t_min, "t_min")
+        norm = as_choice(norm, "norm", ("rms", "max"))
+        r = (self.ratio if norm == "rms" else self.ratio_max)[self.t >= t_min]
         r = r[np.isfinite(r)]
         return float(np.max(r)) if r.size else math.nan
 
+    def __repr__(self) -> str:
+        i = len(self.t) - 1
+        head = [("N", self.n_agents), ("d", self.d), ("k", self.k), ("method", repr(self.method)),
+                ("dt", self.dt), ("n_steps", self.n_steps),
+                ("t", f"<{len(self.t)} saved times in [{self.t[0]:.4g}, {self.t[-1]:.4g}]>"),
+                ("valid", self.valid),
+                ("", f"at t={self.t[i]:.4g}: error {self.error[i]:.4g} ≤ bound "
+                     f"{self.bound[i]:.4g}, error_max {self.error_max[i]:.4g} ≤ bound_max "
+                     f"{self.bound_max[i]:.4g}"),
+                ("worst_ratio_after(1.0)", self.worst_ratio_after(1.0)),
+                ("", f"<{len(_SERIES)} series ({len(self.t)},) such as error, bound; "
+                     "summary() tabulates them>"),
+                ("wall_time", self.wall_time)]
+        return result_repr(self, head, skip=[f.name for f in fields(self)])
+
+    def summary(self, rows: int = 8) -> str:
+        """A text table of the series at ``rows`` saved times (evenly spread, first and last
+        included): ``t``, ``error``, ``bound``, ``ratio``, ``error_max``, ``bound_max``,
+        ``ratio_max``, ``w1_coupling``, ``w1_bound``, ``paper_bound``; then the note."""
+        rows = as_int(rows, "rows", low=2)
+        cols = {"t": self.t, "error": self.error, "bound": self.bound, "ratio": self.ratio,
+                "error_max": self.error_max, "bound_max": self.bound_max,
+                "ratio_max": self.ratio_max, "w1_coupling": self.w1_coupling,
+                "w1_bound": self.w1_bound, "paper_bound": self.paper_bound}
+        head = (f"Certificate: N={self.n_agents}, d={self.d} → k={self.k}, {self.method} "
+                f"dt={self.dt:g}, {self.n_steps} steps; valid={self.valid}")
+        return "\n".join([head, table(cols, sample_rows(len(self.t), rows)), self.note])
+
+    @property
     def valid(self) -> bool:
         """Whether ``bound >= error``, ``bound_max >= error_max`` and ``bound_v >= error_v``
         at every saved time."""
         return bool(np.all(self.bound >= self.error) and np.all(self.bound_max >= self.error_max)
                     and np.all(self.bound_v >= self.error_v))
+
+
+#: The per-saved-time series of a :class:`Certificate`.
+_SERIES = ("error", "error_max", "bound", "bound_max", "roundoff", "w1_coupling", "w1_bound",
+           "error_v", "bound_v", "paper_bound", "paper_bound_max", "saturated")
+
+
+def _ratio(b: np.ndarray, e: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(e > 0, b / np.where(e > 0, e, 1.0), np.nan)
 
 
 def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=None,
@@ -199,10 +244,12 @@ def certify(scene, M, x0, v0=None, *, t_span, dt, method: str = "euler", save=No
     ...                t_span=(0, 2), dt=0.05, save=SaveAt(every=10))
     >>> cert.t
     array([0. , 0.5, 1. , 1.5, 2. ])
-    >>> cert.valid(), bool(cert.worst_ratio() < 10)
+    >>> cert.valid, bool(cert.worst_ratio_after(1.0) < 10)
     (True, True)
     >>> cert.labels["bound"], cert.labels["error"]
     ('certified bound', 'measured')
+    >>> print(cert.summary(rows=2).splitlines()[1])
+      t     error     bound  ratio  error_max  bound_max  ratio_max  w1_coupling  w1_bound  paper_bound
     """
     start = time.perf_counter()
     if not isinstance(scene, Scene):

@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_choice, as_float, as_int
 from ..errors import InvalidInput
 from ._staged import Staged
@@ -132,6 +133,8 @@ def _relative_bound(rms: np.ndarray, b: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Fig4Result:
     """Projection errors (left panel) and recovery errors (right panel) over time."""
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     config: Fig4Config
     t: np.ndarray

@@ -47,6 +47,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .._repr import result_repr
 from .._rng import member_seed
 from ..errors import InvalidInput, KinredWarning
 from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
@@ -88,6 +89,8 @@ class RunResult:
     wall_time : float
     out_dir : Path or None
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     config: Config
     t: np.ndarray

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_int
 from ..errors import InvalidInput
 from ._staged import Staged
@@ -53,6 +54,8 @@ class StrategiesResult:
         ``{stage: "loaded" | "computed"}``.
     wall_time : float
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     rows: list
     stages: dict = field(default_factory=dict)

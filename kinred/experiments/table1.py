@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_choice, as_float, as_int
 from ..errors import InvalidInput
 
@@ -219,6 +220,8 @@ def _verdict(g: float, yes_below: float, no_above: float) -> str:
 @dataclass(frozen=True)
 class Table1Result:
     """Counts per (β, dimension), the Γ curves, and how they were obtained."""
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     config: Table1Config
     counts: dict          # {beta: {dim: (pos, neg, n/a)}}

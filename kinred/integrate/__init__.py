@@ -9,18 +9,20 @@ per-step observers, and ``simulate``, the short loop that joins them.
 * :class:`SaveAt`: what to record and when; observers (:class:`Observer`) see every accepted
   step as a :class:`StepState`;
 * the registry :data:`SOLVERS` (name → :class:`SolverSpec`), read by ``simulate``, the
-  scene-file loader and the cost study; :func:`register_solver` adds an integrator.
+  scene-file loader and the cost study; :func:`register_solver` adds an integrator;
+  :data:`ALIASES` and :func:`method_name`: other names (``"RK45"``, ``"dopri5"``, ``"bs23"``).
 """
 
 from ._controllers import AdaptiveStep, ConstantStep
 from ._observers import Observer, StepState
-from ._registry import METHODS, SOLVERS, SolverSpec, register_solver, unregister_solver
+from ._registry import (ALIASES, METHODS, SOLVERS, SolverSpec, method_name, register_solver,
+                        unregister_solver)
 from ._save import SaveAt
 from ._simulate import Trajectory, simulate
 from ._solvers import EulerMaruyama, ExplicitRK, Solver, VectorField
 from ._tables import BS32, DOPRI5, EULER, HEUN, RK4, TABLES, RKTable
 
-__all__ = ["simulate", "SaveAt", "Trajectory", "METHODS", "SOLVERS", "SolverSpec",
-           "register_solver", "unregister_solver", "Solver", "ExplicitRK", "EulerMaruyama",
+__all__ = ["simulate", "SaveAt", "Trajectory", "METHODS", "SOLVERS", "ALIASES", "SolverSpec",
+           "method_name", "register_solver", "unregister_solver", "Solver", "ExplicitRK", "EulerMaruyama",
            "VectorField", "ConstantStep", "AdaptiveStep", "Observer", "StepState", "RKTable",
            "EULER", "HEUN", "RK4", "DOPRI5", "BS32", "TABLES"]

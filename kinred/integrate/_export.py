@@ -35,12 +35,16 @@ def to_xarray(tr):
     xr = _import_xarray()
     data_vars, coords = {}, {"time": ("time", np.asarray(tr.t, dtype=float))}
     states = [(name, a) for name, a in (("x", tr.x), ("v", tr.v)) if a is not None]
+    ts = np.asarray(tr.t_states if tr.t_states is not None else tr.t, dtype=float)
+    st = "time" if np.array_equal(ts, coords["time"][1]) else "state_time"
     if states:
         _, n, d = states[0][1].shape
         coords["agent"] = ("agent", np.arange(n))
         coords["coordinate"] = ("coordinate", np.arange(d))
+        if st != "time":                   # only the final state was kept
+            coords[st] = (st, ts)
     for name, a in states:
-        data_vars[name] = (("time", "agent", "coordinate"), np.asarray(a))
+        data_vars[name] = ((st, "agent", "coordinate"), np.asarray(a))
     if tr.weights is not None:
         data_vars["weights"] = (("agent",), np.asarray(tr.weights, dtype=float))
     for name, a in tr.observables.items():

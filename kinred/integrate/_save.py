@@ -134,14 +134,17 @@ def check_save_size(save: SaveAt, n_save: int, shape: tuple, order: int, n_obs: 
                     call: str, hint: str = _SAVE_HINT) -> None:
     """:func:`~kinred._validate.check_alloc` of what a run records: the save grid, the
     observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d`` entries) and
-    the states ``(T, N, d)`` requested by ``save.states``; ``call`` names the run's
+    the states ``(T, N, d)`` requested by ``save.states`` (none requested: the final state); ``call`` names the run's
     arguments in the message."""
     n, d = shape
     n_states = int(save.states in (True, "x")) + int(save.states in (True, "v") and order == 2)
     per_point = GRID_POINT_BYTES + n_obs * (OBS_VALUE_BYTES + 16 * d) + 8 * n * d * n_states
     states = f", states (T, N, d) = ({fmt_count(n_save)}, {n}, {d}) x {n_states}" if n_states else ""
-    check_alloc(n_save * per_point, f"{call}: recording {fmt_count(n_save)} save points", hint,
-                detail=f" ({n_obs} observables{states})")
+    final = 0 if isinstance(save.states, str) or save.states else 8 * n * d * order
+    if final:                                      # the final state kept by default
+        states = f", the final state (N, d) = ({n}, {d}) x {order}"
+    check_alloc(n_save * per_point + final, f"{call}: recording {fmt_count(n_save)} save points",
+                hint, detail=f" ({n_obs} observables{states})")
 
 
 class SaveGrid(NamedTuple):
@@ -222,6 +225,10 @@ class Recorder:
         want_v = save.states in (True, "v") and scene.order == 2
         self.X = np.empty((n_save, *shape)) if want_x else None
         self.V = np.empty((n_save, *shape)) if want_v else None
+        # no states requested: keep the final one (Diffrax's default, SaveAt(t1=True)), one
+        # copy at the last save point and nothing per step
+        self.last = n_save - 1 if not isinstance(save.states, str) and not save.states else -1
+        self.final = None
 
     def __call__(self, j, t, x, v):
         """Record save point ``j`` at time ``t`` from the working state ``(x, v)``."""
@@ -232,6 +239,18 @@ class Recorder:
             self.X[j] = xt
         if self.V is not None:
             self.V[j] = v
+        if j == self.last:
+            self.final = ((xt.copy() if xt is x else xt)[None],
+                          None if v is None else v.copy()[None])
+
+    def states(self, times: np.ndarray) -> tuple:
+        """``(x, v, t_states)``: the recorded states and their times (the save times), or,
+        when none were requested, the final state ``(1, N, d)`` at ``times[-1]``."""
+        if self.final is not None:
+            return self.final[0], self.final[1], np.asarray(times[-1:], dtype=float)
+        if self.X is None and self.V is None:
+            return None, None, np.empty(0)
+        return self.X, self.V, np.asarray(times, dtype=float)
 
     def observables(self) -> Mapping[str, np.ndarray]:
         """The recorded observables, ``(T, ...)`` arrays in a read-only mapping."""

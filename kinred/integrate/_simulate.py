@@ -10,20 +10,21 @@ and runs the short loop :func:`_loop`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
 import numpy as np
 
 from .. import observables as _obs
+from .._repr import brief, result_repr, sample_rows, table
 from .._rng import as_generator
-from .._validate import as_choice, as_float, as_span
+from .._validate import as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
 from ._observers import Progress, as_observers, state_view
-from ._registry import SOLVERS
+from ._registry import SOLVERS, method_name
 from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
                     save_points)
 from ._solvers import VectorField
@@ -31,7 +32,7 @@ from ._solvers import VectorField
 __all__ = ["simulate", "Trajectory"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Trajectory:
     """Result of :func:`simulate`.
 
@@ -41,8 +42,11 @@ class Trajectory:
         Saved times (always including ``t0`` and the final time).
     observables : mapping of str to ndarray
         ``(T,)`` or ``(T, ...)`` arrays, one per requested observable.
-    x, v : (T, N, d) ndarray or None
-        States when requested (``v`` None for first-order scenes).
+    x, v : (T_s, N, d) ndarray or None
+        States at the times ``t_states``: at every save time when requested
+        (``SaveAt(states=True)``, or ``"x"``/``"v"`` for one of them, the other None); by
+        default the final state alone (``T_s = 1``, ``tr.x[-1]`` is the state at ``t1``, as
+        Diffrax saves ``t1``). ``v`` is None for first-order scenes.
     method : str
     n_steps : int
         Accepted steps.
@@ -60,6 +64,8 @@ class Trajectory:
         Description of the scene (its effects and coupling convention).
     seed : None, int, SeedSequence or Generator
         The ``seed`` the run was given.
+    t_states : (T_s,) ndarray
+        Times of the saved states: ``t`` when states were requested, else ``[t1]``.
     """
 
     t: np.ndarray
@@ -75,13 +81,53 @@ class Trajectory:
     weights: np.ndarray | None = None
     scene: str = ""
     seed: Any = None
+    t_states: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        ts = self.t_states if self.t_states is not None else np.empty(0)
+        at = ("" if ts.size == 0 else f" at t={ts[0]:.4g}" if ts.size == 1 else
+              f" at the {ts.size} save times")
+        head = [("method", repr(self.method)), ("dt", self.dt), ("n_steps", self.n_steps),
+                ("t", f"<{len(self.t)} saved times in [{self.t[0]:.4g}, {self.t[-1]:.4g}]>"),
+                ("x", brief(self.x) + at if self.x is not None else "None"),
+                ("v", brief(self.v) + at if self.v is not None else "None"),
+                ("observables", self.observables), ("n_rhs_evals", self.n_rhs_evals),
+                ("n_rejected", self.n_rejected), ("wall_time", self.wall_time),
+                ("scene", brief(self.scene))]
+        return result_repr(self, head, skip=[f.name for f in fields(self)])
+
+    def summary(self, rows: int = 8) -> str:
+        """A text table of the observables at ``rows`` save times (evenly spread, first and
+        last included): scalar ones as they are, vector ones (``centre``,
+        ``mean_velocity``) by their Euclidean norm ``|name|``.
+
+        Examples
+        --------
+        >>> from kinred.dynamics import Scene, Alignment
+        >>> tr = simulate(Scene([Alignment()]), np.zeros((3, 2)), np.eye(3)[:, :2], (0, 1), 0.5)
+        >>> print(tr.summary())
+          t    gamma  lambda
+          0   0.4444       0
+        0.5   0.1111  0.1111
+          1  0.05221    0.25
+        """
+        rows = as_int(rows, "rows", low=2)
+        cols = {"t": self.t}
+        for name, a in self.observables.items():
+            a = np.asarray(a, dtype=float)
+            if a.ndim == 1:
+                cols[name] = a
+            else:
+                cols[f"|{name}|"] = np.sqrt(np.sum(a.reshape(len(a), -1) ** 2, axis=1))
+        return table(cols, sample_rows(len(self.t), rows))
 
     def to_xarray(self):
         """The trajectory as an ``xarray.Dataset`` (needs the optional extra ``xarray``).
 
         Dimensions ``time`` (coordinate: the saved times), ``agent`` and ``coordinate``
         (integer labels); data variables ``x`` and ``v`` ``(time, agent, coordinate)`` when
-        the states were saved, ``weights`` ``(agent,)`` for a weighted scene, and one
+        the states were saved (``(state_time, agent, coordinate)`` with ``state_time = [t1]``
+        when only the final state was kept, the default), ``weights`` ``(agent,)`` for a weighted scene, and one
         variable per observable (``(time,)``, or ``(time, <name>_dim1, ...)``); attributes:
         ``method``, ``dt``, ``n_steps``, ``n_rejected``, ``n_rhs_evals``, ``wall_time_s``,
         ``scene`` (its description), ``seed`` (as given; a non-integer seed as text) and
@@ -163,7 +209,9 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         Step (fixed-step methods; ``(t1 − t0)/dt`` must be an integer) or the initial step
         and save-grid unit of adaptive methods.
     method : str
-        A name in :data:`SOLVERS` (:data:`METHODS`: the built-in ones). Scenes with noise
+        A name in :data:`SOLVERS` (:data:`METHODS`: the built-in ones) or an alias of one
+        (:data:`ALIASES`: SciPy's ``"RK45"``/``"RK23"``, ``"dopri5"``, ``"bs23"``, ...; case,
+        ``-`` and ``_`` ignored); :attr:`Trajectory.method` is the name. Scenes with noise
         require a stochastic method (``"euler_maruyama"``).
     save : SaveAt, optional
         Default ``SaveAt()`` (observables every step, no states).
@@ -233,8 +281,9 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         if bar is not None:
             bar.close()
     rec = run.record
+    x, v, t_states = rec.states(run.grid.times)
     return Trajectory(t=np.asarray(run.grid.times, dtype=float), observables=rec.observables(),
-                      x=rec.X, v=rec.V, method=run.method, n_steps=int(n_steps),
+                      x=x, v=v, t_states=t_states, method=run.method, n_steps=int(n_steps),
                       n_rhs_evals=run.f.n_evals, wall_time=time.perf_counter() - t_start,
                       dt=run.dt, n_rejected=int(run.control.n_rejected),
                       weights=None if scene.weights is None else np.array(scene.weights),
@@ -298,7 +347,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     if not (t1 - t0) / dt <= 2.0**53:  # beyond it t0 + n·dt is no grid (and may be inf)
         raise InvalidInput(f"dt must be at least (t1 - t0)/2**53 = {(t1 - t0) / 2.0**53:.3g} "
                            f"for t_span = ({t0!r}, {t1!r}), got dt = {dt!r}")
-    method = as_choice(method, "method", SOLVERS)
+    method = method_name(method)
     spec = SOLVERS[method]
     if scene.stochastic and not spec.stochastic:
         noisy = " or ".join(f"method={m!r}" for m, s in SOLVERS.items() if s.stochastic)

@@ -76,6 +76,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_float
 from ..errors import InvalidInput
 
@@ -344,6 +345,8 @@ class TheoremBound:
         False when an effect is outside the theorems (noise, unknown effects).
     note : str
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     t: np.ndarray
     eps: float

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._repr import result_repr
 from .._rng import member_seed
 from .._validate import as_array, as_int
 from ..errors import InvalidInput, TooLarge
@@ -59,6 +60,8 @@ class Comparison:
         ``"paired-bracket"`` above :data:`MAX_POT_ATOMS` atoms).
     k : int
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     t: np.ndarray
     w1: np.ndarray
@@ -181,6 +184,8 @@ class ReferenceEstimate:
     exact : bool
         Whether every W1 above was computed exactly.
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     t: np.ndarray
     w1_reference: np.ndarray

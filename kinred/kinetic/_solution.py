@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_array, as_choice, as_float, as_int, as_span, check_alloc
 from ..errors import InvalidInput
 from ..measures import Atomic, Measure, Mixture, PushForward, TensorProduct
@@ -63,6 +64,8 @@ class KineticSolution:
     seed : object
         Noise seed (stochastic scenes only).
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     t: np.ndarray
     x: np.ndarray
@@ -111,6 +114,8 @@ class ReducedSolution:
     scene : Scene
         The projected weighted scene.
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     t: np.ndarray
     y: np.ndarray

@@ -47,6 +47,7 @@ import math
 import numbers
 import os
 import re
+import sys
 
 import numpy as np
 from scipy import stats
@@ -203,6 +204,7 @@ def _coordinates(tables, source, where) -> list[Measure]:
             if not a < b:
                 raise _err(source, f"{key}.support", f"needs a < b (a positive width), got [{a}, {b}]")
             support = (a, b)
+        _check_underflow(decay, repeat, scale if support is None else b - a, source, key)
         for r in range(repeat):
             f = decay**r
             try:
@@ -212,6 +214,25 @@ def _coordinates(tables, source, where) -> list[Measure]:
             except InvalidInput as exc:
                 raise _err(source, key, str(exc)) from None
     return out
+
+
+def _check_underflow(decay: float, repeat: int, width: float, source: str, key: str) -> None:
+    """Refuse a ``decay`` whose last copy ``decay**(repeat - 1)·X`` has a width (scale or
+    support) below the smallest normal float64 (computed in log space: it would be 0 or lose
+    its digits, and the law would have no support)."""
+    if decay >= 1.0 or repeat < 2:
+        return
+    log_w = math.log(width) + (repeat - 1) * math.log(decay)
+    tiny = sys.float_info.min
+    if log_w < math.log(tiny):
+        r = min(repeat - 1, max(1, math.ceil((math.log(tiny) - math.log(width))
+                                             / math.log(decay))))
+        raise _err(source, f"{key}.decay",
+                   f"the widths underflow: {width:g}·decay**r is below the smallest float64 "
+                   f"{tiny:.3g} from copy r = {r} on (decay = {decay:g}; the last, r = "
+                   f"{repeat - 1}, ≈ 10^{log_w / math.log(10):.0f}), so those laws would "
+                   "have width 0 and no support; "
+                   "use a larger decay or fewer repeats")
 
 
 def measure_from_dict(data: dict, source: str = "<measure>") -> Measure:

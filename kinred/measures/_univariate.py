@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import stats
 
@@ -77,6 +79,10 @@ class Univariate(Measure):
         a0, b0 = (float(v) for v in dist.support())
         self.truncated = False
         self._generic_trunc = False
+        if math.isnan(a0) or math.isnan(b0) or not a0 < b0:
+            raise InvalidInput(
+                f"dist {dist.dist.name} has no support: dist.support() = ({a0}, {b0}); its "
+                f"parameters are invalid (args {dist.args}, kwds {dist.kwds}; e.g. scale = 0)")
         if support is None:
             if not (np.isfinite(a0) and np.isfinite(b0)):
                 raise InvalidInput(

@@ -61,6 +61,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy.special import erfc, erfcinv
 
+from .._validate import fmt_bytes, fmt_count
 from ..errors import InvalidInput, TooLarge
 
 __all__ = ["MAX_MODES", "Grid", "kernel_scales", "build_grid", "FastSum", "flat_extents"]
@@ -356,12 +357,18 @@ def _measure(phi, E, t, xt, C, xi, target, max_modes, name, budget=None):
 
 
 def _too_large(name, ext, tol, modes, max_modes, k) -> TooLarge:
+    # ``modes`` is a lower estimate, or inf when the widest axis alone needs more than
+    # ``max_modes`` (the 1-D search stops there): then only that bound is known
+    need = (f"more than max_modes={fmt_count(max_modes)} Fourier modes for tol={tol:g}: the "
+            "widest axis alone needs more" if not math.isfinite(modes) else
+            f"at least {fmt_count(int(modes))} Fourier modes for tol={tol:g}, more than "
+            f"max_modes={fmt_count(max_modes)}")
     return TooLarge(
         f"NUFFT: a {k}-D cloud of extents {np.array2string(ext, precision=4)} (diameter "
-        f"<= {float(np.sqrt(np.sum(ext * ext))):.4g}) with kernel {name} needs at least "
-        f"{modes:.3g} Fourier modes for tol={tol:g}, more than max_modes={max_modes} (about "
-        f"{grid_bytes(max_modes, k, 2) / 2**20:.0f} MB of transform arrays); raise tol or "
-        "max_modes, or use the Dense backend for so spread a cloud")
+        f"<= {float(np.sqrt(np.sum(ext * ext))):.4g}) with kernel {name} needs {need} "
+        f"(max_modes means about {fmt_bytes(grid_bytes(max_modes, k, 2))} of transform "
+        "arrays); raise tol or max_modes, or use the Dense backend for so spread a "
+        "cloud")
 
 
 def _width_search(phi, E, target, xt, max_modes, name):

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._repr import result_repr
 from .._validate import as_array
 from ..errors import InvalidInput
 from ._base import Projection, as_projection
@@ -86,6 +87,8 @@ class TrajectoryDistortionResult:
     n_coincident : int
         Number of (time, pair) with coincident agents (skipped).
     """
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     eps: float
     ratio_min: float

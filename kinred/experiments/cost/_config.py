@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from ..._repr import result_repr
 from ..._validate import as_choice, as_int
 from ...errors import InvalidInput
 from ...io import to_jsonable
@@ -102,6 +103,8 @@ class CostConfig:
 @dataclass(frozen=True)
 class CostResult:
     """Numbers of the cost study (``studies``: one JSON-ready dict per study), headline, machine."""
+
+    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     config: CostConfig
     studies: dict
