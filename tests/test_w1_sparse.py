@@ -224,3 +224,20 @@ def test_weights_with_equal_totals_are_normalized_unequal_refused():
     with pytest.raises(InvalidInput, match="positive finite total"):
         w1(x, y, a=np.zeros(7))
     assert isinstance(r, W1Result)
+
+
+@pytest.mark.parametrize("d", [3, 12])
+def test_time_budget_gives_a_certified_bracket_with_the_reason(d):
+    rng = np.random.default_rng(10)
+    x, y = rng.random((400, d)), rng.random((300, d)) + 0.1
+    ref = _dense(x, np.full(400, 1 / 400), y, np.full(300, 1 / 300))
+    r = w1(x, y, "sparse", max_seconds=0.0)
+    assert not r.exact and r.lower <= ref <= r.upper and 0 < r.lower
+    assert "max_seconds = 0 ran out during the certificate" in r.note
+
+
+def test_large_high_dimensional_problems_use_trees():
+    from kinred.distance._search import use_tree
+
+    assert use_tree(10**6, 10**6, 20) and not use_tree(2 * 10**4, 2 * 10**4, 20)
+    assert use_tree(10, 10, 8)

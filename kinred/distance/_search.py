@@ -18,10 +18,24 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TREE_MAX_DIM", "knn", "ctransform", "CTree"]
+__all__ = ["TREE_MAX_DIM", "BLAS_MAX_PAIRS", "use_tree", "knn", "ctransform", "CTree",
+           "OutOfTime"]
 
-#: Dimensions up to which the searches use trees (above: blocked BLAS).
+#: Dimensions up to which the searches use trees (above: blocked BLAS, unless too many pairs).
 TREE_MAX_DIM = 8
+
+#: Above this many pairs N·M the searches use trees in any dimension (a BLAS pass over all
+#: pairs would take minutes; clouds with decaying widths have a small intrinsic dimension).
+BLAS_MAX_PAIRS = 2 * 10**9
+
+
+class OutOfTime(Exception):
+    """Internal: a search passed its deadline (caught by the sparse solver)."""
+
+
+def use_tree(n: int, m: int, d: int) -> bool:
+    """Whether the searches over ``n × m`` pairs in dimension ``d`` use trees."""
+    return d <= TREE_MAX_DIM or n * m > BLAS_MAX_PAIRS
 
 _EPS = np.finfo(np.float64).eps
 _LEAF = 32
@@ -78,12 +92,14 @@ class CTree:
 
 
 def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
-               jbest: np.ndarray, tree: CTree | None = None, block: int = 512):
+               jbest: np.ndarray, tree: CTree | None = None, block: int = 512,
+               deadline: float | None = None):
     """Exact ``f(xᵢ) = minⱼ (|xᵢ − yⱼ| − vⱼ)`` over all ``j`` and a minimizer ``jᵢ``.
 
     ``best``/``jbest`` are an attained value and its column for every row (from the candidate
     graph): the search starts from them. ``tree`` (a :class:`CTree` of ``Y``) selects the
-    branch and bound; without it, blocked BLAS.
+    branch and bound; without it, blocked BLAS. Past ``deadline`` (``time.perf_counter``)
+    it raises :class:`OutOfTime` between chunks of rows.
     """
     if tree is not None:
         from ._kernels import ctransform_tree
@@ -95,10 +111,22 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
         vs = np.ascontiguousarray(v[tree.order])
         vmax = tree.node_vmax(v)
         scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(X))) + float(np.max(np.abs(v)))
-        ctransform_tree(np.ascontiguousarray(X), tree.Ys, vs, tree.lo, tree.hi, vmax,
-                        tree.first_leaf, tree.starts, f, jp, 16 * _EPS * scale)
+        X = np.ascontiguousarray(X)
+        chunk = 1 << 16
+        for s in range(0, X.shape[0], chunk):
+            _check(deadline)
+            ctransform_tree(X[s:s + chunk], tree.Ys, vs, tree.lo, tree.hi, vmax,
+                            tree.first_leaf, tree.starts, f[s:s + chunk], jp[s:s + chunk],
+                            16 * _EPS * scale)
         return f, tree.order[jp]
-    return _ctransform_blas(X, Y, v, best, jbest, block)
+    return _ctransform_blas(X, Y, v, best, jbest, block, deadline)
+
+
+def _check(deadline):
+    import time
+
+    if deadline is not None and time.perf_counter() > deadline:
+        raise OutOfTime
 
 
 def _centred(X: np.ndarray, Y: np.ndarray):
@@ -107,7 +135,7 @@ def _centred(X: np.ndarray, Y: np.ndarray):
     return Xc, Yc, np.einsum("ij,ij->i", Xc, Xc), np.einsum("ij,ij->i", Yc, Yc)
 
 
-def _ctransform_blas(X, Y, v, best, jbest, block):
+def _ctransform_blas(X, Y, v, best, jbest, block, deadline=None):
     """Blocked ``|x|² + |y|² − 2x·y`` (centred), then the exact values of every column within
     twice the distance error of the row's minimum (so the minimum over them is exact)."""
     d = X.shape[1]
@@ -115,6 +143,8 @@ def _ctransform_blas(X, Y, v, best, jbest, block):
     f = np.array(best, dtype=np.float64)
     jb = np.array(jbest, dtype=np.int64)
     for s in range(0, X.shape[0], block):
+        if s % (64 * block) == 0:
+            _check(deadline)
         e = min(s + block, X.shape[0])
         D2 = x2[s:e, None] + y2[None, :] - 2.0 * (Xc[s:e] @ Yc.T)
         # |D2 − |x − y|²| <= δ, so |sqrt(D2₊) − |x − y|| <= sqrt(δ)
@@ -139,7 +169,7 @@ def _ctransform_blas(X, Y, v, best, jbest, block):
 def knn(X: np.ndarray, Y: np.ndarray, k: int, block: int = 512) -> np.ndarray:
     """Indices ``(N, k)`` of the ``k`` nearest rows of ``Y`` for every row of ``X``."""
     k = min(k, Y.shape[0])
-    if X.shape[1] <= TREE_MAX_DIM:
+    if use_tree(X.shape[0], Y.shape[0], X.shape[1]):
         from scipy.spatial import cKDTree
 
         _, idx = cKDTree(Y).query(X, k=k, workers=-1)
