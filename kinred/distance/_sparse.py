@@ -54,7 +54,7 @@ DEFAULT_K = 8
 
 #: Bytes per candidate edge at the peak of one solve: kinred's keys, rows, columns and costs
 #: and POT's copies (64-bit sources, targets, costs) and network-simplex arc arrays.
-BYTES_PER_EDGE = 112
+BYTES_PER_EDGE = 128
 
 _EPS = np.finfo(np.float64).eps
 
@@ -180,13 +180,14 @@ def _violations(X, Y, u, v, f, jf, g, ig, m, tiny):
     return np.concatenate([rows[bad_r] * m + jf[bad_r], ig[bad_c] * m + cols[bad_c]])
 
 
-def price(n: int, m: int, d: int, k: int, max_edges: int, max_bytes=None) -> None:
-    """The memory preflight of :func:`sparse_w1` (TooLarge naming the size that fits)."""
-    per_atom = 8 * (4 * d + 24)
-    nbytes = BYTES_PER_EDGE * max_edges + per_atom * (n + m)
+def price(n: int, m: int, d: int, k: int, edges: int, max_bytes=None) -> None:
+    """The memory preflight of :func:`sparse_w1` for a graph of ``edges`` edges (TooLarge
+    naming the size that fits)."""
+    per_atom = 8 * (4 * d + 40)
+    nbytes = BYTES_PER_EDGE * edges + per_atom * (n + m)
 
     def hint():
-        per = BYTES_PER_EDGE * (2 * k + 3) + per_atom
+        per = 2 * (BYTES_PER_EDGE * (k + 1) + per_atom)     # n = m: edges (k + 1)(n + m)
         from .._validate import max_bytes_limit
         fits = max_bytes_limit(max_bytes) // max(per, 1)
         return (f"about {fits} atoms per side fit (k = {k}); pass a smaller k or max_edges, or "
@@ -194,8 +195,18 @@ def price(n: int, m: int, d: int, k: int, max_edges: int, max_bytes=None) -> Non
 
     check_alloc(nbytes, "w1(method='sparse'): the candidate graph and the network simplex",
                 hint, max_bytes=max_bytes, keyword="max_bytes",
-                detail=f" for {n} x {m} atoms in dimension {d} (up to {max_edges} edges of "
+                detail=f" for {n} x {m} atoms in dimension {d} ({edges} edges of "
                        f"{BYTES_PER_EDGE} bytes)")
+
+
+def _fits(n, m, d, k, edges, max_bytes) -> bool:
+    from ..errors import TooLarge
+
+    try:
+        price(n, m, d, k, edges, max_bytes)
+    except TooLarge:
+        return False
+    return True
 
 
 def default_max_edges(n: int, m: int, k: int) -> int:
@@ -232,7 +243,7 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
     n, m, d = X.shape[0], Y.shape[0], X.shape[1]
     budget_edges = default_max_edges(n, m, k) if max_edges is None else int(max_edges)
-    price(n, m, d, k, max(budget_edges, min(n * m, (2 * k + 1) * (n + m))), max_bytes)
+    price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
     tm = {}
     keys = _initial_keys(X, a, Y, b, k, paired, rng)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
@@ -280,6 +291,9 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         elif merged.size > budget_edges:
             reason = (f"the edge budget max_edges = {budget_edges} is spent (the next graph "
                       f"has {merged.size} edges)")
+        elif not _fits(n, m, d, k, merged.size, max_bytes):
+            reason = (f"the next graph ({merged.size} edges) would exceed the memory limit "
+                      f"max_bytes (KINRED_MAX_BYTES)")
         elif max_seconds is not None and elapsed >= max_seconds:
             reason = f"the time budget max_seconds = {max_seconds:g} is spent ({elapsed:.1f} s)"
         if reason:

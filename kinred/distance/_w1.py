@@ -25,6 +25,10 @@ METHODS = ("auto", "exact", "exact-lazy", "sparse", "exact-1d", "product-l1", "b
 #: above it, it switches to POT's lazy solver ``ot.lp.emd2_lazy`` (memory O(N + M)).
 DEFAULT_MAX_DENSE_BYTES = 2**27
 
+#: "auto" uses the dense LP only up to this many pairs N·M (2000 × 2000 atoms); beyond, the
+#: sparse method is faster (docs/w1.md; ``benchmarks/bench_w1.py --scaling``) and as exact.
+AUTO_DENSE_PAIRS = 4_000_000
+
 #: "auto" solves the exact LP only while N·M stays below this (6000 × 6000 atoms; its cost at
 #: this size is in docs/performance.md, section W1); beyond it, it raises TooLarge with the cost
 #: of the exact LP (a certified bracket is ``method="bracket"``).
@@ -184,9 +188,10 @@ def w1(
           Euclidean W1 from above. The result has ``metric="l1"``.
         * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (lower bounds from 1-D projections and a subsampled dual, upper bounds from explicit couplings).
         * ``"auto"`` -- an exact value, never a bracket: exact-1d in d = 1; for atomic measures
-          (or tensor grids of at most 10⁶ atoms) exact (dense) below ``max_dense_bytes``,
-          above it ``sparse`` (Euclidean; any size) and, should that not close,
-          exact-lazy while ``N·M ≤ max_exact_pairs`` (the ℓ1 metric: exact-lazy); product-l1 for ``metric="l1"`` and two product
+          (or tensor grids of at most 10⁶ atoms) exact (dense) up to
+          ``N·M = AUTO_DENSE_PAIRS`` (4·10⁶) and ``max_dense_bytes``, beyond it ``sparse``
+          (Euclidean; any size) and, should that not close, the dense or lazy LP while they
+          fit (the ℓ1 metric: exact, then exact-lazy); product-l1 for ``metric="l1"`` and two product
           measures. Otherwise it raises (:class:`~kinred.errors.TooLarge` for sizes,
           :class:`~kinred.errors.InvalidInput` for continuous laws in d > 1) naming the sizes,
           the method that would be exact and its estimated cost, and ``method="bracket"``. Its
@@ -348,7 +353,8 @@ def _resolve_auto(p: _Problem) -> tuple[str, _Problem]:
     if PA is not None and PB is not None:
         q = replace(p, A=PA, B=PB, n_atoms=(PA.n, PB.n))
         pairs = PA.n * PB.n
-        if pairs <= p.max_exact_pairs and 8 * pairs <= p.max_dense_bytes:
+        dense = pairs <= p.max_exact_pairs and 8 * pairs <= p.max_dense_bytes
+        if dense and (pairs <= AUTO_DENSE_PAIRS or p.metric != "euclidean"):
             return "exact", q
         if p.metric == "euclidean":
             return "auto-sparse", q
@@ -371,12 +377,16 @@ def _run_sparse(p: _Problem) -> W1Result:
 
 
 def _run_auto_sparse(p: _Problem) -> W1Result:
-    """"auto" beyond the dense LP: the sparse method; if it does not close, the lazy LP while
-    ``N·M ≤ max_exact_pairs``, else TooLarge carrying the certified bracket (``.result``)."""
+    """"auto" beyond :data:`AUTO_DENSE_PAIRS`: the sparse method; if it does not close, the
+    dense LP where it fits ``max_dense_bytes``, the lazy LP while ``N·M ≤ max_exact_pairs``,
+    else TooLarge carrying the certified bracket (``.result``)."""
     res = _run_sparse(p)
     if res.exact:
         return res
     n, m = res.n_atoms
+    if n * m <= p.max_exact_pairs and 8 * n * m <= p.max_dense_bytes:
+        dense = _run_exact(p)
+        return replace(dense, note=f"{dense.note} (the sparse method did not close: {res.note})")
     if n * m <= p.max_exact_pairs:
         lazy = _run_exact_lazy(p)
         return replace(lazy, note=f"{lazy.note} (the sparse method did not close: {res.note})")
