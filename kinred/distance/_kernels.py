@@ -2,8 +2,8 @@ r"""Private numba kernel of :mod:`kinred.distance`: the exact c-transform by bra
 
 Only this module of :mod:`kinred.distance` imports numba; the kernel uses ``cache=True``.
 
-``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack)``
-    For every row ``xᵢ`` of ``X`` the exact c-transform
+``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1)``
+    For every row ``xᵢ`` of ``X[r0:r1]`` the exact c-transform
 
     .. math:: f(x_i) = \min_j \bigl(|x_i - y_j| - v_j\bigr)
 
@@ -17,7 +17,9 @@ Only this module of :mod:`kinred.distance` imports numba; the kernel uses ``cach
     round-off of the bound). ``best``/``jbest`` enter as an upper bound and its minimizer
     (from the candidate graph: a value that is attained) and are overwritten with the result.
     Distances of leaf rows are computed from the coordinate differences,
-    ``sqrt(Σₖ (xₖ − yₖ)²)``, in the order of :func:`scipy.spatial.distance.cdist`.
+    ``sqrt(Σₖ (xₖ − yₖ)²)``, in the order of :func:`scipy.spatial.distance.cdist`. The GIL is
+    released (``nogil``): disjoint row ranges run in the threads of
+    :func:`kinred._parallel.run_parallel`.
 
 Its plain-numpy twin is :func:`ctransform_numpy` (the same minimum by brute force, in
 blocks; tests compare the two at 1e-12 relative).
@@ -26,7 +28,7 @@ blocks; tests compare the two at 1e-12 relative).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 __all__ = ["ctransform_tree", "ctransform_numpy"]
 
@@ -43,16 +45,8 @@ def _box_bound(x, lo, hi, node):
     return np.sqrt(s)
 
 
-@njit(cache=True, parallel=True)
-def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack):
-    n_chunks = (X.shape[0] + 1023) // 1024
-    for c in prange(n_chunks):
-        _ctransform_rows(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack,
-                         c * 1024, min(X.shape[0], (c + 1) * 1024))
-
-
-@njit(cache=True)
-def _ctransform_rows(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1):
+@njit(cache=True, nogil=True)
+def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1):
     d = X.shape[1]
     n_nodes = lo.shape[0]
     stack = np.empty(256, np.int64)

@@ -111,13 +111,19 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
         vs = np.ascontiguousarray(v[tree.order])
         vmax = tree.node_vmax(v)
         scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(X))) + float(np.max(np.abs(v)))
+        from .._parallel import get_num_threads, run_parallel
+
         X = np.ascontiguousarray(X)
+        slack = 16 * _EPS * scale
         chunk = 1 << 16
         for s in range(0, X.shape[0], chunk):
             _check(deadline)
-            ctransform_tree(X[s:s + chunk], tree.Ys, vs, tree.lo, tree.hi, vmax,
-                            tree.first_leaf, tree.starts, f[s:s + chunk], jp[s:s + chunk],
-                            16 * _EPS * scale)
+            e = min(s + chunk, X.shape[0])
+            cuts = np.linspace(s, e, get_num_threads() + 1).astype(np.int64)
+            run_parallel(lambda g, r: ctransform_tree(X, tree.Ys, vs, tree.lo, tree.hi, vmax,
+                                                      tree.first_leaf, tree.starts, f, jp, slack,
+                                                      r[0], r[1]),
+                         [(int(cuts[i]), int(cuts[i + 1])) for i in range(cuts.size - 1)])
         return f, tree.order[jp]
     return _ctransform_blas(X, Y, v, best, jbest, block, deadline)
 
