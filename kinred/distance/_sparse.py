@@ -49,6 +49,10 @@ __all__ = ["SparseOutcome", "sparse_w1", "BYTES_PER_EDGE", "DEFAULT_K", "DEFAULT
 #: and of the duals, which the network simplex accumulates along its spanning tree).
 DEFAULT_RTOL = 1e-13
 
+#: Cap of the duals' round-off allowance, relative to the value: an exact result is proved
+#: within ``(DEFAULT_RTOL + MAX_NOISE_RTOL)·W1`` plus the round-off of the dual sum.
+MAX_NOISE_RTOL = 9e-13
+
 #: Neighbours per atom of the candidate graph (from each side).
 DEFAULT_K = 8
 
@@ -231,7 +235,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         Stop (``exact``) when ``upper − lower ≤ rtol·upper + 16ε·S + 4δ``: ``S = Σ aᵢ|fᵢ − t| +
         Σ bⱼ|gⱼ + t|`` the size of the dual sum (``t`` the median of ``f``) and ``δ =
         max |c − u − v|`` over the plan's edges (zero in exact arithmetic: the round-off the
-        network simplex left in its potentials). Default :data:`DEFAULT_RTOL`.
+        network simplex left in its potentials; ``4δ`` capped at ``MAX_NOISE_RTOL·upper``).
+        Default :data:`DEFAULT_RTOL`.
     max_iter, max_edges, max_seconds : budgets of the column generation.
     max_bytes : the memory limit of the preflight.
     num_iter_max : network-simplex iterations per solve (default ``max(1e5, 50·edges)``).
@@ -276,7 +281,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
             break
         tm["certify"] += time.perf_counter() - s
         lower = max(lower, lo)
-        tol = (rtol if rtol is not None else DEFAULT_RTOL) * upper + 16 * _EPS * scale + 4 * noise
+        tol = ((rtol if rtol is not None else DEFAULT_RTOL) * upper + 16 * _EPS * scale
+               + min(4 * noise, MAX_NOISE_RTOL * upper))
         if upper - lower <= tol:
             exact = True
             break
