@@ -241,3 +241,15 @@ def test_large_high_dimensional_problems_use_trees():
 
     assert use_tree(10**6, 10**6, 20) and not use_tree(2 * 10**4, 2 * 10**4, 20)
     assert use_tree(10, 10, 8)
+
+
+def test_run_table_and_summary_state_the_certified_gap():
+    """kinred run: a time that is not exact shows its bracket and gap; summary.json's
+    ``w1_rel_gap_max`` is the largest relative gap (0 when every time is exact)."""
+    from kinred.experiments.kinetic_run import _rel_gap
+
+    r = {"lower": np.array([1.0, 0.99, 2.0]), "upper": np.array([1.0, 1.0, 2.5]),
+         "exact": np.array([True, False, False])}
+    np.testing.assert_allclose(_rel_gap(r), [0.0, 0.01, 0.2], rtol=1e-12)
+    r["exact"][:] = True
+    assert np.all(_rel_gap(r) == 0.0)
