@@ -200,7 +200,7 @@ def w1(
         Weights of raw point arrays ``mu``/``nu`` (uniform by default); must be None for
         measures. Non-negative with a positive total; both are divided by their totals (as
         SciPy does), which must be equal (relative 1e-9) when both are given.
-    neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes :
+    neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes : optional
         ``method="sparse"``: nearest neighbours per atom from each side; the relative gap at
         which the bounds meet (default 1e-13 plus the round-off of the duals); the budgets of
         the column generation (solves, edges -- default four times the first graph --,
