@@ -233,7 +233,9 @@ def test_time_budget_gives_a_certified_bracket_with_the_reason(d):
     ref = _dense(x, np.full(400, 1 / 400), y, np.full(300, 1 / 300))
     r = w1(x, y, "sparse", max_seconds=0.0)
     assert not r.exact and r.lower <= ref <= r.upper and 0 < r.lower
-    assert "max_seconds = 0 ran out during the certificate" in r.note
+    assert "max_seconds = 0" in r.note and "NOT exact" in r.note
+    if d == 3:                                     # the tree search: cut short, still a bound
+        assert "cut short for" in r.note
 
 
 def test_large_high_dimensional_problems_use_trees():
@@ -253,3 +255,20 @@ def test_run_table_and_summary_state_the_certified_gap():
     np.testing.assert_allclose(_rel_gap(r), [0.0, 0.01, 0.2], rtol=1e-12)
     r["exact"][:] = True
     assert np.all(_rel_gap(r) == 0.0)
+
+
+def test_a_search_cut_short_gives_a_lower_bound_of_the_minimum():
+    from kinred.distance import _search
+
+    rng = np.random.default_rng(11)
+    X, Y = rng.normal(size=(500, 3)), rng.normal(size=(3000, 3))
+    v = rng.normal(size=3000) * 0.3
+    f_ref, _ = ctransform_numpy(X, Y, v)
+    start = np.zeros(500, np.int64)
+    best = np.sqrt(((X - Y[0]) ** 2).sum(axis=1)) - v[0]
+    opened = np.zeros(500, np.int8)
+    f, _ = ctransform(X, Y, v, best, start, CTree(Y), deadline=0.0, open_rows=opened)
+    assert 0 < opened.sum() < 500                             # some rows cut short, not all
+    assert np.all(f <= f_ref + 1e-12)                         # a bound, never above the minimum
+    np.testing.assert_allclose(f[opened == 0], f_ref[opened == 0], rtol=1e-12, atol=1e-15)
+    assert _search.LEAVES_PAST_DEADLINE == 8

@@ -2,7 +2,8 @@ r"""Private numba kernel of :mod:`kinred.distance`: the exact c-transform by bra
 
 Only this module of :mod:`kinred.distance` imports numba; the kernel uses ``cache=True``.
 
-``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1)``
+``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1,
+max_leaves, open_rows)``
     For every row ``xᵢ`` of ``X[r0:r1]`` the exact c-transform
 
     .. math:: f(x_i) = \min_j \bigl(|x_i - y_j| - v_j\bigr)
@@ -16,6 +17,9 @@ Only this module of :mod:`kinred.distance` imports numba; the kernel uses ``cach
     that bound is not below the best value found (less a safety ``slack`` covering the
     round-off of the bound). ``best``/``jbest`` enter as an upper bound and its minimizer
     (from the candidate graph: a value that is attained) and are overwritten with the result.
+    A row that would visit more than ``max_leaves`` leaves stops there: its ``best`` becomes
+    the smallest bound of the nodes still open (a certified *lower* bound of its minimum, not
+    attained), ``open_rows[i] = 1``, and ``jbest`` the best column found.
     Distances of leaf rows are computed from the coordinate differences,
     ``sqrt(Σₖ (xₖ − yₖ)²)``, in the order of :func:`scipy.spatial.distance.cdist`. The GIL is
     released (``nogil``): disjoint row ranges run in the threads of
@@ -46,7 +50,8 @@ def _box_bound(x, lo, hi, node):
 
 
 @njit(cache=True, nogil=True)
-def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1):
+def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1,
+                    max_leaves, open_rows):
     d = X.shape[1]
     n_nodes = lo.shape[0]
     stack = np.empty(256, np.int64)
@@ -56,12 +61,24 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
         jb = jbest[i]
         top = 1
         stack[0] = 0
+        leaves = 0
         while top > 0:
+            if leaves >= max_leaves:          # stop: the frontier's bounds bound the minimum
+                lower = b
+                for q in range(top):
+                    lb = _box_bound(x, lo, hi, stack[q]) - vmax[stack[q]] - slack
+                    if lb < lower:
+                        lower = lb
+                if lower < b:
+                    b = lower
+                    open_rows[i] = 1
+                break
             top -= 1
             node = stack[top]
             if _box_bound(x, lo, hi, node) - vmax[node] - slack >= b:
                 continue
             if node >= first_leaf:
+                leaves += 1
                 leaf = node - first_leaf
                 for j in range(starts[leaf], starts[leaf + 1]):
                     s = 0.0

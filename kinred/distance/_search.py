@@ -16,6 +16,8 @@ Two searches over all pairs ``(xᵢ, yⱼ)`` of two atomic measures, both exact:
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 __all__ = ["TREE_MAX_DIM", "BLAS_MAX_PAIRS", "use_tree", "knn", "ctransform", "CTree",
@@ -27,6 +29,10 @@ TREE_MAX_DIM = 8
 #: Above this many pairs N·M the searches use trees in any dimension (a BLAS pass over all
 #: pairs would take minutes; clouds with decaying widths have a small intrinsic dimension).
 BLAS_MAX_PAIRS = 2 * 10**9
+
+
+#: Leaves a row of the tree search may visit once the deadline has passed.
+LEAVES_PAST_DEADLINE = 8
 
 
 class OutOfTime(Exception):
@@ -93,13 +99,15 @@ class CTree:
 
 def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
                jbest: np.ndarray, tree: CTree | None = None, block: int = 512,
-               deadline: float | None = None):
+               deadline: float | None = None, open_rows: np.ndarray | None = None):
     """Exact ``f(xᵢ) = minⱼ (|xᵢ − yⱼ| − vⱼ)`` over all ``j`` and a minimizer ``jᵢ``.
 
     ``best``/``jbest`` are an attained value and its column for every row (from the candidate
     graph): the search starts from them. ``tree`` (a :class:`CTree` of ``Y``) selects the
     branch and bound; without it, blocked BLAS. Past ``deadline`` (``time.perf_counter``)
-    it raises :class:`OutOfTime` between chunks of rows.
+    the tree search visits at most :data:`LEAVES_PAST_DEADLINE` leaves per row, and a row it
+    cuts short gets a certified lower bound of its minimum (``open_rows[i] = 1``); the BLAS
+    search raises :class:`OutOfTime` between blocks.
     """
     if tree is not None:
         from ._kernels import ctransform_tree
@@ -115,22 +123,23 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
 
         X = np.ascontiguousarray(X)
         slack = 16 * _EPS * scale
-        chunk = 1 << 16
+        if open_rows is None:
+            open_rows = np.zeros(X.shape[0], np.int8)
+        chunk = 1 << 14
         for s in range(0, X.shape[0], chunk):
-            _check(deadline)
+            late = deadline is not None and time.perf_counter() > deadline
+            cap = LEAVES_PAST_DEADLINE if late else 1 << 62
             e = min(s + chunk, X.shape[0])
             cuts = np.linspace(s, e, get_num_threads() + 1).astype(np.int64)
             run_parallel(lambda g, r: ctransform_tree(X, tree.Ys, vs, tree.lo, tree.hi, vmax,
                                                       tree.first_leaf, tree.starts, f, jp, slack,
-                                                      r[0], r[1]),
+                                                      r[0], r[1], cap, open_rows),
                          [(int(cuts[i]), int(cuts[i + 1])) for i in range(cuts.size - 1)])
         return f, tree.order[jp]
     return _ctransform_blas(X, Y, v, best, jbest, block, deadline)
 
 
 def _check(deadline):
-    import time
-
     if deadline is not None and time.perf_counter() > deadline:
         raise OutOfTime
 
