@@ -205,7 +205,7 @@ def w1(
         which the bounds meet (default 1e-13 plus the round-off of the duals); the budgets of
         the column generation (solves, edges -- default four times the first graph --,
         seconds -- default none); the memory limit of its preflight
-        (:func:`kinred._validate.check_alloc`, default ``KINRED_MAX_BYTES`` or 2 GiB).
+        (``kinred._validate.check_alloc``, default ``KINRED_MAX_BYTES`` or 2 GiB).
     metric : {"euclidean", "l1"}
         Ground metric for the exact methods. The bracket is Euclidean only.
     product : bool
