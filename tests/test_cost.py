@@ -214,6 +214,9 @@ def test_w1_methods_agree(smoke):
         assert by["exact-lazy"]["value"] == pytest.approx(W, rel=1e-9)
         b = by["bracket"]
         assert b["lower"] <= W * (1 + 1e-9) and W <= b["upper"] * (1 + 1e-9)
+        sp = by["sparse"]                                   # the sparse method's row (issue 22)
+        assert sp["lower"] <= W * (1 + 1e-12) and W <= sp["upper"] * (1 + 1e-12)
+        assert not sp["exact"] or sp["value"] == pytest.approx(W, rel=1e-12)
 
 
 def test_pareto_and_time_to_reach():

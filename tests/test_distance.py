@@ -46,9 +46,12 @@ def test_translation_lazy_and_auto_lazy():
     t = np.array([0.3, -0.1, 2.0, 0.0])
     r = w1(x, x + t, "exact-lazy")
     assert r.method == "exact-lazy" and r.value == pytest.approx(np.linalg.norm(t), rel=1e-11)
-    r2 = w1(x, x + t, max_dense_bytes=1000)  # 60*60*8 > 1000: auto must go lazy
-    assert r2.method == "exact-lazy" and r2.exact and "auto chose exact-lazy" in r2.note
+    r2 = w1(x, x + t, max_dense_bytes=1000)  # 60*60*8 > 1000: auto goes sparse (Euclidean)
+    assert r2.method == "sparse" and r2.exact and "auto chose sparse" in r2.note
     assert r2.value == pytest.approx(np.linalg.norm(t), rel=1e-11)
+    r3 = w1(x, x + t, max_dense_bytes=1000, metric="l1")  # l1: auto goes lazy
+    assert r3.method == "exact-lazy" and r3.exact and "auto chose exact-lazy" in r3.note
+    assert r3.value == pytest.approx(np.abs(t).sum(), rel=1e-11)
 
 
 def test_two_diracs():
@@ -311,8 +314,10 @@ def test_auto_is_exact_or_raises_never_a_silent_bracket():
     br = w1(x, y, "bracket", leaf_size=20, dual_sample=30, seed=0)   # asked for: a bracket
     assert br.lower <= exact <= br.upper and not br.exact
     assert abs(br.value - exact) > 0.2 * exact                      # the midpoint is far off
-    with pytest.raises(TooLarge) as exc:                            # what "auto" returned
-        w1(x, y, max_exact_pairs=100, leaf_size=20, dual_sample=30, seed=0)
+    r = w1(x, y, max_exact_pairs=100, max_dense_bytes=0)            # beyond the LPs: sparse
+    assert r.exact and r.method == "sparse" and r.value == pytest.approx(exact, rel=1e-12)
+    with pytest.raises(TooLarge) as exc:                            # l1: no sparse method
+        w1(x, y, metric="l1", max_exact_pairs=100, leaf_size=20, dual_sample=30, seed=0)
     msg = str(exc.value)
     for part in ("mu has 80 atoms and nu 70", "N·M = 5600", "max_exact_pairs = 100",
                  "method='exact-lazy'", "memory O(N + M)", "roughly", "method='exact'",
@@ -320,8 +325,6 @@ def test_auto_is_exact_or_raises_never_a_silent_bracket():
         assert part in msg, part
     r = w1(x, y, max_exact_pairs=5600)                              # the limit raised: exact
     assert r.exact and r.method == "exact" and r.value == exact
-    with pytest.raises(TooLarge, match="max_exact_pairs = 100"):    # l1, atoms, not products
-        w1(x, y, metric="l1", max_exact_pairs=100)
 
 
 def test_auto_on_continuous_laws_in_d_above_1_raises_with_the_alternatives():
@@ -362,8 +365,8 @@ def test_validation_messages():
         w1(x, np.zeros((3, 3)))
     with pytest.raises(InvalidInput, match="non-negative"):
         w1(x, x, a=[0.5, 0.6, -0.1])
-    with pytest.raises(InvalidInput, match="sum to one"):
-        w1(x, x, b=[0.5, 0.6, 0.1])
+    with pytest.raises(InvalidInput, match=r"equal totals.*sum\(a\) = 1.0 and sum\(b\) = 1.2"):
+        w1(x, x, a=[0.5, 0.4, 0.1], b=[0.5, 0.6, 0.1])
     with pytest.raises(InvalidInput, match="length 3"):
         w1(x, x, a=[0.5, 0.5])
     with pytest.raises(InvalidInput, match="method must be one of"):

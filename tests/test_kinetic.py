@@ -45,9 +45,10 @@ def test_linear_scenes_project_exactly(scene_fn):
     assert np.all(tb.term_jl == 0.0)
 
 
-def test_compare_asks_for_a_bracket_explicitly_beyond_exact_sizes(monkeypatch):
-    """w1(method="auto") raises beyond its size limit (issue 18); compare then asks for the
-    certified bracket, which its ``exact``/``lower``/``upper`` fields report."""
+def test_compare_beyond_the_dense_lp_is_sparse_exact_or_a_certified_bracket(monkeypatch):
+    """Beyond the dense LP, compare gets the exact W1 from the sparse method (issue 22); when
+    its memory preflight refuses, the paired certified bracket, which ``exact``/``lower``/
+    ``upper`` report."""
     from kinred.distance import w1
 
     d = 6
@@ -56,12 +57,16 @@ def test_compare_asks_for_a_bracket_explicitly_beyond_exact_sizes(monkeypatch):
     red = reduce(sol, M=jl_matrix(2, d, seed=0))
     exact = compare(sol, red)
     assert exact.exact.all() and exact.method == "exact"
-    monkeypatch.setitem(w1.__kwdefaults__, "max_exact_pairs", 10)   # every time is too large
+    monkeypatch.setitem(w1.__kwdefaults__, "max_dense_bytes", 0)     # no dense LP
+    monkeypatch.setitem(w1.__kwdefaults__, "max_exact_pairs", 10)    # nor a lazy one
+    sp = compare(sol, red)
+    assert sp.method == "sparse" and sp.exact.all()
+    np.testing.assert_allclose(sp.w1, exact.w1, rtol=1e-12, atol=1e-15)
+    monkeypatch.setitem(w1.__kwdefaults__, "max_bytes", 1000)        # the preflight refuses
     br = compare(sol, red)
-    assert br.method == "bracket"
+    assert br.method == "paired-bracket" and not br.exact.any()
     assert np.all(br.lower <= exact.w1 * (1 + 1e-12)) and np.all(exact.w1 <= br.upper * (1 + 1e-12))
-    # 40 atoms fit in one leaf of the hierarchical coupling: the bracket's bounds meet
-    np.testing.assert_allclose(br.w1[br.exact], exact.w1[br.exact], rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(br.w1, 0.5 * (br.lower + br.upper), rtol=1e-15)
 
 
 def test_free_transport_closed_form():

@@ -1,10 +1,12 @@
 """Wasserstein-1 distances (eq. (4.5) of the paper).
 
 :func:`w1` returns a :class:`W1Result` saying what it computed: exact values (POT's network
-simplex with a dense or lazily evaluated Euclidean cost, exact 1-D formulas, the exact ℓ1 W1
-of product measures) or, when asked for with ``method="bracket"``, a certified bracket
-``[lower, upper]``. The default ``method="auto"`` returns exact values only: beyond the exact
-sizes it raises, naming the exact method, its cost and the bracket. Measures, arrays of
+simplex with a dense or lazily evaluated Euclidean cost, or on a sparse candidate graph
+proved optimal by the c-transform of its duals over all pairs -- ``method="sparse"``, exact at
+10⁵–10⁶ atoms, docs/w1.md --, exact 1-D formulas, the exact ℓ1 W1 of product measures) or a
+certified bracket ``[lower, upper]`` (``method="bracket"``, or a sparse solve whose budget ran
+out), which ``float()`` refuses. The default ``method="auto"`` returns exact values only: when
+no method reaches one it raises, naming the exact method, its cost and the bracket. Measures, arrays of
 points and :mod:`kinred.quantize` results are accepted alike.
 :func:`sliced_w1` is a different distance and is kept under its own name.
 :func:`paired_w1_bracket` brackets W1 between two measures whose atoms correspond (same count,

@@ -170,6 +170,7 @@ def normalize_pair(mu, nu, a, b):
         ``s``: a W1 (or bound, or standard error) computed between ``A`` and ``B`` is ``1/s``
         times the one between ``mu`` and ``nu``.
     """
+    _equal_totals(a, b, mu, nu)
     A = normalize(mu, a, "mu", "a")
     B = normalize(nu, b, "nu", "b")
     if A.dim != B.dim:
@@ -209,8 +210,51 @@ def normalize(obj, w, name: str, wname: str):
         X = X[:, None]
     if X.shape[0] < 1 or X.shape[1] < 1:
         raise InvalidInput(f"{name} must hold at least one point of dimension >= 1, got shape {X.shape}")
-    W = as_weights(w, wname, X.shape[0])
+    W = _weights(w, wname, X.shape[0])
     return Pts(np.ascontiguousarray(X, dtype=np.float64), W)
+
+
+def _total(w, wname: str, n: int | None = None) -> float:
+    """The total of weights ``w``: finite, non-negative, positive sum (InvalidInput else)."""
+    w = as_array(w, wname, ndim=1)
+    if n is not None and w.shape[0] != n:
+        raise InvalidInput(f"{wname} must have length {n}, got length {w.shape[0]}")
+    if np.any(w < 0):
+        i = int(np.argmin(w))
+        raise InvalidInput(f"{wname} must be non-negative, got {w[i]} at index {i}")
+    total = float(np.sum(w))
+    if not (total > 0 and math.isfinite(total)):
+        raise InvalidInput(f"{wname} must have a positive finite total, got sum {total!r}")
+    return total
+
+
+def _weights(w, wname: str, n: int) -> np.ndarray:
+    """Weights of ``n`` atoms divided by their (positive) total; uniform when None."""
+    if w is None:
+        return as_weights(None, wname, n)
+    total = _total(w, wname, n)
+    return as_array(w, wname, ndim=1) / total
+
+
+def _equal_totals(a, b, mu, nu) -> None:
+    """Refuse weights ``a``, ``b`` of raw points whose totals differ (relative 1e-9).
+
+    Both measures are normalized by their totals (as SciPy's ``wasserstein_distance``); two
+    different totals mean two measures of different masses, whose W1 is undefined.
+    """
+    if a is None or b is None:
+        return
+    ms = _measure_classes()
+    from ..quantize import Quantization
+
+    if any(isinstance(o, (ms.Measure, Quantization)) for o in (mu, nu)):
+        return  # normalize() refuses the weights with its own message
+    ta, tb = _total(a, "a"), _total(b, "b")
+    if abs(ta - tb) > 1e-9 * max(ta, tb):
+        raise InvalidInput(
+            f"a and b must have equal totals (W1 compares measures of equal mass; both are "
+            f"then divided by it), got sum(a) = {ta!r} and sum(b) = {tb!r}; divide each by its "
+            "own sum to compare the two normalized measures")
 
 
 def _from_quantization(q, name):

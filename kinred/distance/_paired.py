@@ -41,7 +41,7 @@ def _gamma(n: int) -> float:
     return n * _U / (1.0 - n * _U)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class W1Bracket(W1Result):
     """A certified bracket ``lower ≤ W1 ≤ upper`` (a :class:`W1Result` with labels).
 
@@ -55,8 +55,9 @@ class W1Bracket(W1Result):
     label : str
         ``"certified bracket"``.
 
-    Other attributes as in :class:`W1Result` (``value`` is the midpoint, ``method`` is
-    ``"paired-bracket"``, ``width = upper − lower``).
+    Other attributes as in :class:`W1Result` (``value`` is the midpoint, also named
+    ``midpoint``; ``float()`` refuses the bracket; ``method`` is ``"paired-bracket"``,
+    ``width = upper − lower``).
     """
 
     lower_from: str = ""
@@ -229,6 +230,6 @@ def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal
     upper_from = "index coupling sum_i w_i |a_i - b_i|"
     note = (f"certified bracket: lower bound from the {lower_from}, upper bound from the "
             f"{upper_from}; no linear program solved")
-    return W1Bracket(0.5 * (lower + upper), "paired-bracket", False, lower, upper, (n, n), note,
-                     "euclidean", lower_from=lower_from, upper_from=upper_from,
+    return W1Bracket(0.5 * (lower + upper), "paired-bracket", False, float(lower), float(upper),
+                     (n, n), note, "euclidean", lower_from=lower_from, upper_from=upper_from,
                      n_directions=tried)

@@ -15,14 +15,19 @@ from ._inputs import Prod, Pts, grid_marginals, marginal, normalize_pair
 from ._oned import product_upper, w1_1d, w1_atoms_1d, w1_cont_atoms
 from ._pot import emd_dense, emd_lazy
 from ._result import SlicedW1Result, W1Result
+from ._sparse import DEFAULT_K, run_sparse
 
 __all__ = ["w1", "sliced_w1", "METHODS", "DEFAULT_MAX_DENSE_BYTES", "DEFAULT_MAX_EXACT_PAIRS"]
 
-METHODS = ("auto", "exact", "exact-lazy", "exact-1d", "product-l1", "bracket")
+METHODS = ("auto", "exact", "exact-lazy", "sparse", "exact-1d", "product-l1", "bracket")
 
 #: "auto" builds the dense N×M cost matrix (8·N·M bytes) only below this many bytes (128 MiB);
 #: above it, it switches to POT's lazy solver ``ot.lp.emd2_lazy`` (memory O(N + M)).
 DEFAULT_MAX_DENSE_BYTES = 2**27
+
+#: "auto" uses the dense LP only up to this many pairs N·M (2000 × 2000 atoms); beyond, the
+#: sparse method is faster (docs/w1.md; ``benchmarks/bench_w1.py --scaling``) and as exact.
+AUTO_DENSE_PAIRS = 4_000_000
 
 #: "auto" solves the exact LP only while N·M stays below this (6000 × 6000 atoms; its cost at
 #: this size is in docs/performance.md, section W1); beyond it, it raises TooLarge with the cost
@@ -130,6 +135,12 @@ def w1(
     leaf_size: int = 512,
     dual_sample: int = 1000,
     grid_atoms: int = _GRID_ATOMS,
+    neighbors: int = DEFAULT_K,
+    rtol: float | None = None,
+    max_iter: int = 30,
+    max_edges: int | None = None,
+    max_seconds: float | None = None,
+    max_bytes=None,
     seed=None,
 ) -> W1Result:
     r"""Wasserstein-1 distance between two probability measures on ℝᵈ.
@@ -154,12 +165,21 @@ def w1(
         :func:`kinred.quantize.quantize` (a ``TensorQuantization`` is used as the product of its
         1-D factors, never enumerated; mixtures and push-forwards are materialized, up to
         10⁶ atoms), or raw points ``(N, d)`` (a 1-D array is ``N`` points of ℝ¹).
-    method : {"auto", "exact", "exact-lazy", "exact-1d", "product-l1", "bracket"}
+    method : {"auto", "exact", "exact-lazy", "sparse", "exact-1d", "product-l1", "bracket"}
         * ``"exact"`` -- two atomic measures: ``ot.emd2`` on the dense Euclidean cost matrix
           (8·N·M bytes), ``numItermax = max(100000, 50·N·M)``; raises
           :class:`~kinred.errors.NotConverged` if POT still stops early.
         * ``"exact-lazy"`` -- the same LP with ``ot.lp.emd2_lazy`` (costs computed on the fly,
           memory O(N + M), slower than the dense solver: docs/performance.md, section W1).
+        * ``"sparse"`` -- two atomic measures, Euclidean: POT's network simplex on a sparse
+          candidate graph (``neighbors`` nearest neighbours from each side plus one coupling of
+          the full measures), certified by the c-transform of its duals over *all* pairs
+          (a lower bound, Kantorovich–Rubinstein), with column generation until the plan's
+          cost (an upper bound) and the lower bound meet to round-off: then ``exact=True``
+          and the value is proved optimal. If a budget (``max_iter``, ``max_edges``,
+          ``max_seconds``) runs out first: the certified bracket, ``exact=False``, the reason
+          in ``note``. Memory ``O(neighbors·(N + M))``, priced first (``max_bytes``); the
+          method of choice beyond a few thousand atoms (docs/w1.md).
         * ``"exact-1d"`` -- d = 1: sorted merge for atoms, :math:`\int|F - G|` by quadrature for
           continuous laws (exact to ~1e-13).
         * ``"product-l1"`` -- two product measures (``TensorProduct``, a full tensor grid of
@@ -167,15 +187,25 @@ def w1(
           :math:`\sum_j W_1(\mu_j,\nu_j)` (Lemma 4.1); it bounds the
           Euclidean W1 from above. The result has ``metric="l1"``.
         * ``"bracket"`` -- certified ``lower ≤ W1 ≤ upper`` (lower bounds from 1-D projections and a subsampled dual, upper bounds from explicit couplings).
-        * ``"auto"`` -- an exact value, never a bracket: exact-1d in d = 1; exact (dense below
-          ``max_dense_bytes``, lazy above) for atomic measures (or tensor grids of at most 10⁶
-          atoms) with ``N·M ≤ max_exact_pairs``; product-l1 for ``metric="l1"`` and two product
+        * ``"auto"`` -- an exact value, never a bracket: exact-1d in d = 1; for atomic measures
+          (or tensor grids of at most 10⁶ atoms) exact (dense) up to
+          ``N·M = AUTO_DENSE_PAIRS`` (4·10⁶) and ``max_dense_bytes``, beyond it ``sparse``
+          (Euclidean; any size) and, should that not close, the dense or lazy LP while they
+          fit (the ℓ1 metric: exact, then exact-lazy); product-l1 for ``metric="l1"`` and two product
           measures. Otherwise it raises (:class:`~kinred.errors.TooLarge` for sizes,
           :class:`~kinred.errors.InvalidInput` for continuous laws in d > 1) naming the sizes,
           the method that would be exact and its estimated cost, and ``method="bracket"``. Its
           ``method`` and ``note`` say which method ran.
     a, b : (N,) / (M,) array_like, optional
-        Weights of raw point arrays ``mu``/``nu`` (uniform by default); must be None for measures.
+        Weights of raw point arrays ``mu``/``nu`` (uniform by default); must be None for
+        measures. Non-negative with a positive total; both are divided by their totals (as
+        SciPy does), which must be equal (relative 1e-9) when both are given.
+    neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes : optional
+        ``method="sparse"``: nearest neighbours per atom from each side; the relative gap at
+        which the bounds meet (default 1e-13 plus the round-off of the duals); the budgets of
+        the column generation (solves, edges -- default four times the first graph --,
+        seconds -- default none); the memory limit of its preflight
+        (``kinred._validate.check_alloc``, default ``KINRED_MAX_BYTES`` or 2 GiB).
     metric : {"euclidean", "l1"}
         Ground metric for the exact methods. The bracket is Euclidean only.
     product : bool
@@ -232,19 +262,34 @@ def w1(
     leaf_size = as_int(leaf_size, "leaf_size", low=1)
     dual_sample = as_int(dual_sample, "dual_sample", low=0)
     grid_atoms = as_int(grid_atoms, "grid_atoms", low=1)
+    sparse = _sparse_options(neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes)
     A, B, unit = normalize_pair(mu, nu, a, b)
     A, B = _unwrap_1d(A), _unwrap_1d(B)
     problem = _Problem(
         A=A, B=B, d=A.dim, n_atoms=(_n_atoms(A), _n_atoms(B)), unit=unit, metric=metric,
         product=product, max_dense_bytes=max_dense_bytes, max_exact_pairs=max_exact_pairs,
         num_iter_max=num_iter_max, n_projections=n_projections, leaf_size=leaf_size,
-        dual_sample=dual_sample, grid_atoms=grid_atoms, rng=_LazyRng(seed))
+        dual_sample=dual_sample, grid_atoms=grid_atoms, rng=_LazyRng(seed), sparse=sparse)
     chosen = method
     if method == "auto":
         chosen, problem = _resolve_auto(problem)
     res = _RUNNERS[chosen](problem)
     note = f"auto chose {res.method}: {res.note}" if method == "auto" else res.note
     return _in_units(res, unit, note)
+
+
+def _sparse_options(neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes) -> dict:
+    """The validated options of ``method="sparse"``."""
+    from .._validate import as_float, max_bytes_limit
+
+    return dict(
+        k=as_int(neighbors, "neighbors", low=1),
+        rtol=None if rtol is None else as_float(rtol, "rtol", low=0.0),
+        max_iter=as_int(max_iter, "max_iter", low=1),
+        max_edges=None if max_edges is None else as_int(max_edges, "max_edges", low=1),
+        max_seconds=None if max_seconds is None else as_float(max_seconds, "max_seconds",
+                                                              low=0.0),
+        max_bytes=max_bytes_limit(max_bytes))
 
 
 class _LazyRng:
@@ -284,6 +329,7 @@ class _Problem:
     dual_sample: int
     grid_atoms: int
     rng: _LazyRng
+    sparse: dict
 
 
 def _unwrap_1d(m):
@@ -294,22 +340,64 @@ def _unwrap_1d(m):
 def _resolve_auto(p: _Problem) -> tuple[str, _Problem]:
     """The exact method "auto" picks for ``p``, and ``p`` with its atoms materialized for an LP.
 
-    exact-1d in d = 1; the exact LP (dense below ``max_dense_bytes``, lazy above) for atomic
-    measures (or all-atomic products of at most 10⁶ atoms) with ``N·M ≤ max_exact_pairs``;
-    product-l1 for ``metric="l1"`` and two product measures. Otherwise no exact method fits:
-    :func:`_no_exact_method` says why, what would be exact and at what cost.
+    exact-1d in d = 1; for atomic measures (or all-atomic products of at most 10⁶ atoms) the
+    dense LP below ``max_dense_bytes``, above it the sparse method (Euclidean; falling back to
+    the lazy LP while ``N·M ≤ max_exact_pairs``, :func:`_run_auto_sparse`), the lazy LP for the
+    ℓ1 metric while ``N·M ≤ max_exact_pairs``; product-l1 for ``metric="l1"`` and two product
+    measures. Otherwise no exact method fits: :func:`_no_exact_method` says why, what would
+    be exact and at what cost.
     """
     if p.d == 1:
         return "exact-1d", p
-    side = min(p.max_exact_pairs, _MAX_MATERIALIZE)
-    PA, PB = _as_pts(p.A, side), _as_pts(p.B, side)
-    if PA is not None and PB is not None and PA.n * PB.n <= p.max_exact_pairs:
-        method = "exact" if 8 * PA.n * PB.n <= p.max_dense_bytes else "exact-lazy"
-        return method, replace(p, A=PA, B=PB, n_atoms=(PA.n, PB.n))
+    PA, PB = _as_pts(p.A, _MAX_MATERIALIZE), _as_pts(p.B, _MAX_MATERIALIZE)
+    if PA is not None and PB is not None:
+        q = replace(p, A=PA, B=PB, n_atoms=(PA.n, PB.n))
+        pairs = PA.n * PB.n
+        dense = pairs <= p.max_exact_pairs and 8 * pairs <= p.max_dense_bytes
+        if dense and (pairs <= AUTO_DENSE_PAIRS or p.metric != "euclidean"):
+            return "exact", q
+        if p.metric == "euclidean":
+            return "auto-sparse", q
+        if pairs <= p.max_exact_pairs:
+            return "exact-lazy", q
     products = _marginals(p.A, p.product) is not None and _marginals(p.B, p.product) is not None
     if p.metric == "l1" and products:
         return "product-l1", p
     raise _no_exact_method(p, products)
+
+
+def _run_sparse(p: _Problem) -> W1Result:
+    """The sparse network simplex certified by its dual (:mod:`kinred.distance._sparse`)."""
+    if p.metric != "euclidean":
+        raise InvalidInput("method='sparse' is for the Euclidean ground metric; got metric='l1' "
+                           "(use 'exact' or 'exact-lazy')")
+    PA, PB = _atoms_for_lp(p, "sparse")
+    return run_sparse(PA, PB, p.rng(), num_iter_max=p.num_iter_max, n_atoms=(PA.n, PB.n),
+                      unit=p.unit, **p.sparse)
+
+
+def _run_auto_sparse(p: _Problem) -> W1Result:
+    """"auto" beyond :data:`AUTO_DENSE_PAIRS`: the sparse method; if it does not close, the
+    dense LP where it fits ``max_dense_bytes``, the lazy LP while ``N·M ≤ max_exact_pairs``,
+    else TooLarge carrying the certified bracket (``.result``)."""
+    res = _run_sparse(p)
+    if res.exact:
+        return res
+    n, m = res.n_atoms
+    if n * m <= p.max_exact_pairs and 8 * n * m <= p.max_dense_bytes:
+        dense = _run_exact(p)
+        return replace(dense, note=f"{dense.note} (the sparse method did not close: {res.note})")
+    if n * m <= p.max_exact_pairs:
+        lazy = _run_exact_lazy(p)
+        return replace(lazy, note=f"{lazy.note} (the sparse method did not close: {res.note})")
+    err = TooLarge(
+        f"w1(method='auto'): the sparse method did not reach the exact W1 of {n} x {m} atoms "
+        f"(certified bracket [{res.lower * p.unit:.17g}, {res.upper * p.unit:.17g}]: "
+        f"{res.note}), and N·M = {n * m} > max_exact_pairs = {p.max_exact_pairs} rules out the "
+        "exact lazy LP; ask method='sparse' for the bracket, or raise its budgets (max_iter, "
+        "max_edges, max_seconds) or max_exact_pairs")
+    err.result = _in_units(res, p.unit, res.note)
+    raise err
 
 
 def _fmt_count(n) -> str:
@@ -372,7 +460,8 @@ def _in_units(res: W1Result, unit: float, note: str) -> W1Result:
     """``res``, computed in the common frame, in the units of the input (bounds included)."""
     value = _to_units(res.value, unit, "W1")
     lower, upper = float(res.lower) * unit, float(res.upper) * unit
-    return W1Result(value, res.method, res.exact, lower, upper, res.n_atoms, note, res.metric)
+    return W1Result(value, res.method, res.exact, lower, upper, res.n_atoms, note, res.metric,
+                    res.info)
 
 
 def _atoms_for_lp(p: _Problem, method: str):
@@ -528,10 +617,13 @@ def _via_grid(p: _Problem) -> tuple[float, float, str]:
     return rlo - eG, rup + eG, f"a {G.n}-atom grid quantization (grid error <= {eG * p.unit:.3g})"
 
 
-#: The runner of each resolved method (every entry of :data:`METHODS` but "auto").
+#: The runner of each resolved method (every entry of :data:`METHODS` but "auto", and the
+#: sparse method with the fallbacks of "auto").
 _RUNNERS = {
     "exact": _run_exact,
     "exact-lazy": _run_exact_lazy,
+    "sparse": _run_sparse,
+    "auto-sparse": _run_auto_sparse,
     "exact-1d": _run_exact_1d,
     "product-l1": _run_product_l1,
     "bracket": _run_bracket,

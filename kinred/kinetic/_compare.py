@@ -3,10 +3,13 @@ r"""W1 between the projected and the reduced particle solutions, and reference e
 What is exact and what is an estimate
 -------------------------------------
 * :func:`compare` -- ``W1(M#μᴺ(t), νᴺ(t))`` on ``ℝ²ᵏ``: **exact** (POT's network simplex on
-  the two atomic measures, :func:`kinred.distance.w1`; ``exact`` says so per time) up to
-  ``max_pot_atoms`` atoms (:data:`MAX_POT_ATOMS`); above, no linear program is solved and a
-  **certified bracket** is reported (:func:`kinred.distance.paired_w1_bracket`: max-sliced
-  lower bound, index-coupling upper bound, ``O(N log N)``), with the
+  the two atomic measures, :func:`kinred.distance.w1`: the dense LP up to a few thousand
+  atoms, beyond it ``method="sparse"``, exact and certified by its dual; ``exact`` says so
+  per time). Where the sparse method does not close within its budget (``max_seconds`` per
+  time) its **certified bracket** is reported; where its memory preflight refuses, or above
+  ``max_pot_atoms`` atoms (:data:`MAX_POT_ATOMS`), no linear program is solved and the
+  certified bracket of :func:`kinred.distance.paired_w1_bracket` (max-sliced lower bound,
+  index-coupling upper bound, ``O(N log N)``) is reported instead; with the
   index coupling ``Σᵢ wᵢ ‖(Mxᵢ, Mvᵢ) − (yᵢ, wᵢ)‖`` (an upper bound, the one the proof of
   Theorem 4.3 uses) and the uniform error ``E(t) = max`` over the ``2N`` variables of
   Theorem 3.1 (eq. (3.7)).
@@ -25,7 +28,7 @@ import numpy as np
 
 from .._repr import result_repr
 from .._rng import member_seed
-from .._validate import as_array, as_int
+from .._validate import as_array, as_float, as_int
 from ..errors import InvalidInput, TooLarge
 from ._solution import KineticSolution, ReducedSolution
 
@@ -33,9 +36,12 @@ __all__ = ["Comparison", "ReferenceEstimate", "compare", "reference_estimate", "
            "MAX_POT_ATOMS"]
 
 #: Atom counts above which :func:`compare` solves no linear program (POT) and reports the
-#: certified bracket of :func:`kinred.distance.paired_w1_bracket` instead (the exact LP and
-#: the general bracket of :func:`kinred.distance.w1` cost minutes per saved time there).
-MAX_POT_ATOMS = 100_000
+#: certified bracket of :func:`kinred.distance.paired_w1_bracket` instead.
+MAX_POT_ATOMS = 10_000_000
+
+#: Time budget (seconds) of the sparse W1 method per saved time in :func:`compare`: past it,
+#: its certified bracket is reported (``exact`` False at that time).
+MAX_W1_SECONDS = 120.0
 
 
 @dataclass(frozen=True)
@@ -48,7 +54,8 @@ class Comparison:
     w1 : (T,) ndarray
         W1 on ``ℝ²ᵏ`` (Euclidean ground metric) between ``M#μᴺ(t)`` and ``νᴺ(t)``.
     exact : (T,) bool ndarray
-        Whether each value is exact (POT) or the midpoint of a certified bracket.
+        Whether each value is exact (POT) or the midpoint of a certified bracket (``w1`` then
+        holds the bracket's midpoint, ``lower``/``upper`` its ends).
     lower, upper : (T,) ndarray
         Certified bracket (equal to ``w1`` when exact).
     coupling : (T,) ndarray
@@ -56,8 +63,8 @@ class Comparison:
     uniform : (T,) ndarray
         ``E(t) = maxᵢ max(‖Mxᵢ − yᵢ‖, ‖Mvᵢ − wᵢ‖)`` (Theorem 3.1).
     method : str
-        W1 method used (``"exact"``, ``"exact-lazy"``, ``"bracket"``, or
-        ``"paired-bracket"`` above :data:`MAX_POT_ATOMS` atoms).
+        W1 method(s) used, joined by ``"+"`` when they differ over time (``"exact"``,
+        ``"sparse"``, ``"exact-lazy"``, ``"bracket"``, ``"paired-bracket"``).
     k : int
     """
 
@@ -80,16 +87,24 @@ def _row_norms(D: np.ndarray) -> np.ndarray:
     return np.hypot.reduce(D, axis=1)
 
 
-def _w1_atoms(A, B, wa, wb):
-    """The exact W1 of two atomic measures (``w1(method="auto")``), or, when its size limits
-    refuse them (:class:`~kinred.errors.TooLarge`, raised before any work), the certified
-    bracket asked for explicitly; ``exact``/``lower``/``upper`` of the result say which."""
+def _w1_atoms(A, B, wa, wb, *, max_seconds=MAX_W1_SECONDS, seed=0):
+    """The exact W1 of two atomic measures (``w1(method="auto")``: dense LP, or the sparse
+    method beyond it), else a certified bracket; ``exact``/``lower``/``upper`` say which.
+
+    When the sparse method does not close within ``max_seconds`` its certified bracket is
+    returned; when a memory preflight refuses (:class:`~kinred.errors.TooLarge`, raised before
+    any work) the paired bracket if the atoms correspond (same count and weights), else the
+    general bracket."""
     from ..distance import w1
 
     try:
-        return w1(A, B, method="auto", a=wa, b=wb)
-    except TooLarge:
-        return w1(A, B, method="bracket", a=wa, b=wb)
+        return w1(A, B, method="auto", a=wa, b=wb, max_seconds=max_seconds, seed=seed)
+    except TooLarge as exc:
+        if getattr(exc, "result", None) is not None:
+            return exc.result
+    if A.shape == B.shape and np.array_equal(wa, wb):
+        return _paired_bracket(A, B, wa, seed)
+    return w1(A, B, method="bracket", a=wa, b=wb, seed=seed)
 
 
 def _paired_bracket(A, B, w, seed):
@@ -100,7 +115,8 @@ def _paired_bracket(A, B, w, seed):
 
 
 def compare(solution: KineticSolution, reduced: ReducedSolution, *,
-            max_pot_atoms: int = MAX_POT_ATOMS, seed=0) -> Comparison:
+            max_pot_atoms: int = MAX_POT_ATOMS, max_seconds: float = MAX_W1_SECONDS,
+            seed=0) -> Comparison:
     r"""``W1(M#μᴺ(t), νᴺ(t))`` at every saved time (exact with POT up to ``max_pot_atoms``).
 
     .. math:: W_1\bigl((\mu^N(t))_M, \nu^N(t)\bigr) \le \sum_i w_i
@@ -114,6 +130,8 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
     max_pot_atoms : int
         Above this many atoms no linear program is solved: each time gets the certified
         bracket of :func:`kinred.distance.paired_w1_bracket` (``method="paired-bracket"``).
+    max_seconds : float
+        Time budget of the sparse W1 method per saved time (``MAX_W1_SECONDS``, 120 s).
     seed : int
         Seed of the bracket's random directions (time ``i`` uses ``member_seed(seed, i)``).
 
@@ -137,6 +155,7 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
     if not np.array_equal(solution.t, reduced.t) or solution.x.shape[1] != reduced.y.shape[1]:
         raise InvalidInput("solution and reduced must share save times and atoms (use reduce(solution, ...))")
     max_pot_atoms = as_int(max_pot_atoms, "max_pot_atoms", low=0)
+    max_seconds = as_float(max_seconds, "max_seconds", low=0.0)
     seed = as_int(seed, "seed", low=0)
     P = reduced.projection
     T = len(solution.t)
@@ -147,7 +166,7 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
                            "reduce(solution, ...)); the paired bracket couples atom i with atom i")
     vals, ex, lo, hi, cpl, uni = (np.empty(T) for _ in range(6))
     ex = np.zeros(T, bool)
-    method = ""
+    methods = []
     for i in range(T):
         Mx, Mv = P.apply(solution.x[i]), P.apply(solution.v[i])
         A = np.concatenate([Mx, Mv], axis=1)
@@ -155,15 +174,16 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
         if paired:
             r = _paired_bracket(A, B, w, seed=member_seed(seed, i))
         else:
-            r = _w1_atoms(A, B, w, reduced.weights)
-        vals[i], ex[i], lo[i], hi[i] = r.value, r.exact, r.lower, r.upper
-        method = r.method
+            r = _w1_atoms(A, B, w, reduced.weights, max_seconds=max_seconds,
+                          seed=member_seed(seed, i))
+        vals[i], ex[i], lo[i], hi[i] = r.midpoint, r.exact, r.lower, r.upper
+        methods.append(r.method)
         ex_ = _row_norms(Mx - reduced.y[i])
         ev_ = _row_norms(Mv - reduced.w[i])
         cpl[i] = float(w @ np.hypot(ex_, ev_))
         uni[i] = float(max(ex_.max(), ev_.max()))
     return Comparison(t=np.asarray(solution.t, float), w1=vals, exact=ex, lower=lo, upper=hi,
-                      coupling=cpl, uniform=uni, method=method, k=P.k)
+                      coupling=cpl, uniform=uni, method="+".join(dict.fromkeys(methods)), k=P.k)
 
 
 @dataclass(frozen=True)
@@ -225,7 +245,7 @@ def reference_estimate(solution: KineticSolution, reference: KineticSolution,
         r = _w1_atoms(np.concatenate([solution.x[i], solution.v[i]], axis=1),
                       np.concatenate([reference.x[i], reference.v[i]], axis=1),
                       solution.weights, reference.weights)
-        q[i] = r.value
+        q[i] = r.midpoint
         exact &= bool(r.exact)
     return ReferenceEstimate(t=np.asarray(solution.t, float), w1_reference=c.w1, w1_quantization=q,
                              n_atoms=solution.n_atoms, n_atoms_reference=reference.n_atoms,

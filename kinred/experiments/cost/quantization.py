@@ -68,9 +68,9 @@ def _rows(cfg: QuantizationConfig, mu, fine, bar) -> list:
                    time_s=secs, product_l1=float(err), product_l1_time_s=t_err,
                    bound=float(q.bound))
         if q.n_atoms <= cfg.exact_max and fine is not None:
-            r, t_ex = clock(lambda: w1(atoms.points, fine.points, "exact", a=atoms.weights,
-                                       b=fine.weights), max_repeat=1)
-            row.update(euclidean_to_fine=float(r.value), euclidean_time_s=t_ex)
+            r, t_ex = clock(lambda: w1(atoms.points, fine.points, "auto", a=atoms.weights,
+                                       b=fine.weights), max_repeat=1)   # dense, or sparse
+            row.update(euclidean_to_fine=float(r), euclidean_time_s=t_ex)
         rows.append(row)
         bar.update(1)
     return rows

@@ -1,0 +1,352 @@
+r"""Exact W1 of two large atomic measures on a sparse candidate graph, certified by its dual.
+
+``method="sparse"`` of :func:`kinred.distance.w1` (eq. (4.5) of the paper, Euclidean ground
+cost ``c(x, y) = |x − y|``):
+
+1. **Candidate graph** ``E``: the ``k`` nearest ``yⱼ`` of every ``xᵢ`` and the ``k`` nearest
+   ``xᵢ`` of every ``yⱼ`` (:func:`kinred.distance._search.knn`), plus the support of one
+   coupling of the full measures -- the identity pairing ``i ↔ i`` when the atoms are paired
+   (same count, same weights), otherwise the monotone coupling along the principal axis -- so
+   the problem restricted to ``E`` is feasible.
+2. **Solve** it with POT's network simplex on the edges ``E`` only (``ot.emd`` with a
+   ``scipy.sparse`` cost): an optimal plan ``π`` of the restricted problem, which is a
+   coupling of the full measures, so its cost ``U = Σ πᵢⱼ |xᵢ − yⱼ|`` is an **upper bound** of
+   W1; and dual potentials ``u, v``.
+3. **Certify**: the c-transforms over *all* pairs, ``fᵢ = minⱼ (|xᵢ − yⱼ| − vⱼ)`` and then
+   ``gⱼ = minᵢ (|xᵢ − yⱼ| − fᵢ)`` (exact searches, :func:`kinred.distance._search.ctransform`),
+   satisfy ``fᵢ + gⱼ ≤ |xᵢ − yⱼ|`` for every pair, so by weak duality of the full linear
+   program (equivalently Kantorovich–Rubinstein: ``f`` is 1-Lipschitz)
+   ``L = Σ aᵢ fᵢ + Σ bⱼ gⱼ`` is a **lower bound** of W1, whatever ``v`` was.
+4. **Column generation**: the pairs where the dual constraint ``uᵢ + vⱼ ≤ |xᵢ − yⱼ|`` fails
+   (the minimizers of the c-transforms) join ``E`` and the problem is solved again, until
+   ``U − L`` is at the round-off of the values -- the value is then exact *and proved* -- or
+   a budget (iterations, edges, seconds) is spent: the certified bracket ``[L, U]`` is
+   returned with the reason.
+
+Atoms of zero weight carry no mass and are dropped first. Memory is priced before anything
+is allocated (:func:`kinred._validate.check_alloc`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validate import check_alloc
+from ..errors import NotConverged
+from ._bracket import _principal_axis
+from ._inputs import Pts
+from ._oned import monotone_pieces
+from ._search import CTree, OutOfTime, ctransform, knn, use_tree
+
+__all__ = ["SparseOutcome", "sparse_w1", "BYTES_PER_EDGE", "DEFAULT_K", "DEFAULT_RTOL"]
+
+#: Default relative gap at which the bounds count as meeting (the round-off of the plan's cost
+#: and of the duals, which the network simplex accumulates along its spanning tree).
+DEFAULT_RTOL = 1e-13
+
+#: Cap of the duals' round-off allowance, relative to the value: an exact result is proved
+#: within ``(DEFAULT_RTOL + MAX_NOISE_RTOL)·W1`` plus the round-off of the dual sum.
+MAX_NOISE_RTOL = 9e-13
+
+#: Neighbours per atom of the candidate graph (from each side).
+DEFAULT_K = 8
+
+#: Bytes per candidate edge at the peak of one solve: kinred's keys, rows, columns and costs
+#: and POT's copies (64-bit sources, targets, costs) and network-simplex arc arrays.
+BYTES_PER_EDGE = 128
+
+_EPS = np.finfo(np.float64).eps
+
+#: Below this many pairs N·M the candidate graph is every pair (the problem is dense anyway).
+_ALL_PAIRS = 20_000
+
+
+@dataclass
+class SparseOutcome:
+    """What :func:`sparse_w1` computed (in the common frame of the measures)."""
+
+    lower: float
+    upper: float
+    exact: bool
+    iterations: int
+    edges: int
+    seconds: float
+    reason: str
+    timings: dict = field(default_factory=dict)
+
+
+def pair_costs(X, Y, i, j, chunk: int = 1 << 18) -> np.ndarray:
+    """``|X[i] − Y[j]|`` from coordinate differences (as ``cdist``), in chunks."""
+    out = np.empty(i.size)
+    for s in range(0, i.size, chunk):
+        D = X[i[s:s + chunk]] - Y[j[s:s + chunk]]
+        out[s:s + chunk] = np.sqrt(np.einsum("ij,ij->i", D, D))
+    return out
+
+
+def _coupling_edges(X, a, Y, b, paired: bool, rng):
+    """Support of one coupling of the full measures: identity or monotone along an axis."""
+    if paired:
+        idx = np.arange(X.shape[0], dtype=np.int64)
+        return idx, idx
+    pooled = np.concatenate([X, Y])
+    pw = np.concatenate([a, b]) / 2.0
+    th = _principal_axis(pooled, pw, rng)
+    i, j, _ = monotone_pieces(X @ th, a, Y @ th, b)
+    return i.astype(np.int64), j.astype(np.int64)
+
+
+def _initial_keys(X, a, Y, b, k: int, paired: bool, rng) -> np.ndarray:
+    n, m = X.shape[0], Y.shape[0]
+    if n * m <= _ALL_PAIRS:
+        return np.arange(n * m, dtype=np.int64)
+    ci, cj = _coupling_edges(X, a, Y, b, paired, rng)
+    parts = [ci * m + cj]
+    nx = knn(X, Y, k)
+    parts.append((np.repeat(np.arange(n, dtype=np.int64), nx.shape[1]) * m) + nx.ravel())
+    del nx
+    ny = knn(Y, X, k)
+    parts.append(ny.ravel() * m + np.repeat(np.arange(m, dtype=np.int64), ny.shape[1]))
+    del ny
+    return np.unique(np.concatenate(parts))  # deduplicated: COO -> CSR would sum repeats
+
+
+def _solve(a, b, rows, cols, costs, n, m, num_iter_max):
+    """POT's network simplex on the edges: plan (rows, cols, mass), u, v."""
+    import ot
+    from scipy.sparse import coo_array
+
+    M = coo_array((costs, (rows, cols)), shape=(n, m))
+    it = int(num_iter_max) if num_iter_max is not None else int(max(100_000, 50 * rows.size))
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        G, log = ot.emd(a, b, M, numItermax=it, log=True)
+    code = int(log.get("result_code", 1))
+    if code != 1:
+        raise NotConverged(
+            f"w1(method='sparse'): POT's network simplex on {rows.size} candidate edges of a "
+            f"{n} x {m} problem returned status {code} ({log.get('warning')!r}) after at most "
+            f"numItermax={it} iterations; pass a larger num_iter_max")
+    keep = G.data > 0
+    return (np.asarray(G.row)[keep].astype(np.int64), np.asarray(G.col)[keep].astype(np.int64),
+            np.asarray(G.data)[keep], np.asarray(log["u"], float), np.asarray(log["v"], float))
+
+
+def _first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
+    """Per group (0..n-1, every group present): the minimum of ``vals`` and its ``other``."""
+    order = np.lexsort((vals, group))
+    g = group[order]
+    first = np.ones(g.size, bool)
+    first[1:] = g[1:] != g[:-1]
+    best = np.full(n, np.inf)
+    arg = np.zeros(n, np.int64)
+    best[g[first]] = vals[order][first]
+    arg[g[first]] = other[order][first]
+    return best, arg
+
+
+def _certify(X, a, Y, b, v, plan, trees, deadline=None):
+    """Exact c-transforms ``f = v^c`` (over all ``j``) and ``g = f^c`` (over all ``i``), their
+    minimizers, the lower bound ``Σ a f + Σ b g`` (exact summation), the size of that sum and
+    the number of rows whose search the deadline cut short (their ``f``/``g`` are lower bounds
+    of the minima, so ``f + g ≤ c`` still holds for every pair)."""
+    pr, pc, _ = plan
+    c = pair_costs(X, Y, pr, pc)
+    f0, j0 = _first_per(pr, X.shape[0], c - v[pc], pc)
+    open_f, open_g = np.zeros(X.shape[0], np.int8), np.zeros(Y.shape[0], np.int8)
+    f, jf = ctransform(X, Y, v, f0, j0, trees[1], deadline=deadline, open_rows=open_f)
+    g0, i0 = _first_per(pc, Y.shape[0], c - f[pr], pr)
+    g, ig = ctransform(Y, X, f, g0, i0, trees[0], deadline=deadline, open_rows=open_g)
+    lower = math.fsum(a * f) + math.fsum(b * g)
+    t = float(np.median(f))
+    scale = math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))
+    return f, jf, g, ig, lower, scale, int(open_f.sum()) + int(open_g.sum())
+
+
+def _cheap_lower(X, a, Y, b, rng) -> float:
+    """A certified lower bound without the c-transform: the best 1-D projection (exact 1-D W1
+    of the projected measures, a Kantorovich–Rubinstein bound)."""
+    from ._bracket import projection_lower
+
+    return projection_lower(Pts(X, a), Pts(Y, b), rng, n_projections=8, n_refine=5)[0]
+
+
+def _violations(X, Y, u, v, f, jf, g, ig, m, tiny):
+    """Keys of the c-transforms' minimizers whose dual constraint ``u + v ≤ c`` fails."""
+    n = X.shape[0]
+    rows = np.arange(n, dtype=np.int64)
+    bad_r = f < u - tiny
+    cols = np.arange(m, dtype=np.int64)
+    cc = pair_costs(X, Y, ig, cols)
+    bad_c = cc - u[ig] - v < -tiny
+    return np.concatenate([rows[bad_r] * m + jf[bad_r], ig[bad_c] * m + cols[bad_c]])
+
+
+def price(n: int, m: int, d: int, k: int, edges: int, max_bytes=None) -> None:
+    """The memory preflight of :func:`sparse_w1` for a graph of ``edges`` edges (TooLarge
+    naming the size that fits)."""
+    per_atom = 8 * (4 * d + 40)
+    nbytes = BYTES_PER_EDGE * edges + per_atom * (n + m)
+
+    def hint():
+        per = 2 * (BYTES_PER_EDGE * (k + 1) + per_atom)     # n = m: edges (k + 1)(n + m)
+        from .._validate import max_bytes_limit
+        fits = max_bytes_limit(max_bytes) // max(per, 1)
+        return (f"about {fits} atoms per side fit (k = {k}); pass a smaller k or max_edges, or "
+                "raise the limit")
+
+    check_alloc(nbytes, "w1(method='sparse'): the candidate graph and the network simplex",
+                hint, max_bytes=max_bytes, keyword="max_bytes",
+                detail=f" for {n} x {m} atoms in dimension {d} ({edges} edges of "
+                       f"{BYTES_PER_EDGE} bytes)")
+
+
+def _fits(n, m, d, k, edges, max_bytes) -> bool:
+    from ..errors import TooLarge
+
+    try:
+        price(n, m, d, k, edges, max_bytes)
+    except TooLarge:
+        return False
+    return True
+
+
+def default_max_edges(n: int, m: int, k: int) -> int:
+    """Edge budget of the column generation: four times the initial graph's size."""
+    return int(min(n * m, 4 * (2 * k + 1) * (n + m)))
+
+
+def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = None,
+              max_iter: int = 30, max_edges: int | None = None, max_seconds: float | None = None,
+              max_bytes=None, num_iter_max: int | None = None) -> SparseOutcome:
+    """Certified ``lower ≤ W1(P, Q) ≤ upper`` by the sparse network simplex and its dual.
+
+    Parameters
+    ----------
+    P, Q : Pts
+        The measures (same dimension; any weights, zero weights allowed).
+    rng : numpy Generator
+        For the principal axis of the monotone coupling (unpaired atoms).
+    k : int
+        Nearest neighbours per atom from each side.
+    rtol : float, optional
+        Stop (``exact``) when ``upper − lower ≤ rtol·upper + 16ε·S + 4δ``: ``S = Σ aᵢ|fᵢ − t| +
+        Σ bⱼ|gⱼ + t|`` the size of the dual sum (``t`` the median of ``f``) and ``δ =
+        max |c − u − v|`` over the plan's edges (zero in exact arithmetic: the round-off the
+        network simplex left in its potentials; ``4δ`` capped at ``MAX_NOISE_RTOL·upper``).
+        Default :data:`DEFAULT_RTOL`.
+    max_iter, max_edges, max_seconds : budgets of the column generation.
+    max_bytes : the memory limit of the preflight.
+    num_iter_max : network-simplex iterations per solve (default ``max(1e5, 50·edges)``).
+    """
+    t0 = time.perf_counter()
+    ka, kb = P.weights > 0, Q.weights > 0
+    paired = P.n == Q.n and bool(np.array_equal(P.weights, Q.weights))
+    X, a = np.ascontiguousarray(P.points[ka]), P.weights[ka]
+    Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
+    n, m, d = X.shape[0], Y.shape[0], X.shape[1]
+    budget_edges = default_max_edges(n, m, k) if max_edges is None else int(max_edges)
+    price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
+    tm = {}
+    keys = _initial_keys(X, a, Y, b, k, paired, rng)
+    trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
+    deadline = None if max_seconds is None else t0 + max_seconds
+    tm["graph"] = time.perf_counter() - t0
+    tm["solve"] = tm["certify"] = 0.0
+    lower, upper, reason, exact, it = -math.inf, math.inf, "", False, 0
+    while True:
+        it += 1
+        rows, cols = np.divmod(keys, m)
+        s = time.perf_counter()
+        costs = pair_costs(X, Y, rows, cols)
+        pr, pc, pm, u, v = _solve(a, b, rows, cols, costs, n, m, num_iter_max)
+        del costs
+        pcost = pair_costs(X, Y, pr, pc)
+        up = math.fsum(pm * pcost)
+        noise = float(np.max(np.abs(pcost - u[pr] - v[pc])))  # the duals' own round-off
+        tm["solve"] += time.perf_counter() - s
+        s = time.perf_counter()
+        upper = min(upper, up)
+        try:
+            f, jf, g, ig, lo, scale, n_open = _certify(X, a, Y, b, v, (pr, pc, pm), trees,
+                                                       deadline)
+        except OutOfTime:
+            tm["certify"] += time.perf_counter() - s
+            lower = max(lower, _cheap_lower(X, a, Y, b, rng))
+            scale = upper
+            reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
+                      "certificate (lower bound: the best of the c-transform of an earlier solve"
+                      " and 1-D projections)")
+            break
+        if n_open:
+            lo = max(lo, _cheap_lower(X, a, Y, b, rng))
+        tm["certify"] += time.perf_counter() - s
+        lower = max(lower, lo)
+        tol = ((rtol if rtol is not None else DEFAULT_RTOL) * upper + 16 * _EPS * scale
+               + min(4 * noise, MAX_NOISE_RTOL * upper))
+        if upper - lower <= tol:
+            exact = True
+            break
+        elapsed = time.perf_counter() - t0
+        new = _violations(X, Y, u, v, f, jf, g, ig, m, 4 * _EPS * (scale + upper) + 2 * noise)
+        merged = np.union1d(keys, new)
+        if merged.size == keys.size:
+            reason = ("no dual constraint of the restricted problem fails beyond round-off "
+                      "(its duals are not accurate enough to close the gap)")
+        elif it >= max_iter:
+            reason = f"the iteration budget max_iter = {max_iter} is spent"
+        elif merged.size > budget_edges:
+            reason = (f"the edge budget max_edges = {budget_edges} is spent (the next graph "
+                      f"has {merged.size} edges)")
+        elif not _fits(n, m, d, k, merged.size, max_bytes):
+            reason = (f"the next graph ({merged.size} edges) would exceed the memory limit "
+                      f"max_bytes (KINRED_MAX_BYTES)")
+        elif max_seconds is not None and elapsed >= max_seconds:
+            reason = f"the time budget max_seconds = {max_seconds:g} is spent ({elapsed:.1f} s"
+            reason += (f"; the certificate's search was cut short for {n_open} atoms, whose "
+                       "c-transform values are the bounds of the regions left open)" if n_open
+                       else ")")
+        if reason:
+            break
+        keys = merged
+    if not exact:
+        pad = 8 * _EPS * (upper + scale)
+        lower, upper = max(0.0, lower - pad), upper + pad
+    return SparseOutcome(lower=max(lower, 0.0) if not exact else upper, upper=upper, exact=exact,
+                         iterations=it, edges=int(keys.size),
+                         seconds=time.perf_counter() - t0, reason=reason, timings=tm)
+
+
+def describe(o: SparseOutcome, k: int, unit: float) -> str:
+    """The note of a ``method="sparse"`` result."""
+    head = (f"POT network simplex on a sparse candidate graph ({k} nearest neighbours from "
+            f"each side + one coupling; {o.edges} edges after {o.iterations} solve(s) of "
+            f"column generation, {o.seconds:.2f} s)")
+    if o.exact:
+        return (head + "; optimal over all pairs: the c-transform lower bound meets the plan's "
+                       "cost to round-off")
+    gap = (o.upper - o.lower) / o.upper if o.upper > 0 else 0.0
+    return (head + f"; NOT exact, certified bracket of relative width {gap:.2g} (lower: "
+                   f"c-transform of the duals over all pairs; upper: the plan's cost) because "
+                   f"{o.reason}")
+
+
+
+def run_sparse(PA: Pts, PB: Pts, rng, *, k: int, rtol, max_iter: int, max_edges, max_seconds,
+               max_bytes, num_iter_max, n_atoms, unit: float):
+    """``method="sparse"`` of :func:`kinred.distance.w1`: a :class:`W1Result` in the common
+    frame (exact, or the certified bracket with the reason in its note)."""
+    from ._result import W1Result
+
+    o = sparse_w1(PA, PB, rng, k=k, rtol=rtol, max_iter=max_iter, max_edges=max_edges,
+                  max_seconds=max_seconds, max_bytes=max_bytes, num_iter_max=num_iter_max)
+    info = {"iterations": o.iterations, "edges": o.edges, "seconds": o.seconds,
+            "reason": o.reason, **{f"seconds_{key}": val for key, val in o.timings.items()}}
+    value = o.upper if o.exact else 0.5 * (o.lower + o.upper)
+    return W1Result(value, "sparse", o.exact, o.lower, o.upper, n_atoms, describe(o, k, unit),
+                    "euclidean", info)

@@ -1,0 +1,274 @@
+"""w1(method="sparse"): the sparse network simplex certified by the c-transform of its duals.
+
+Every number is checked against POT's dense network simplex on the full cost matrix (an
+independent computation): ``lower ≤ dense ≤ upper`` always, and ``exact`` ⇒ equal to
+1e-12 relative.
+"""
+
+from unittest import mock
+
+import numpy as np
+import ot
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.spatial.distance import cdist
+
+import kinred.distance._sparse as sparse_mod
+from kinred.distance import W1Result, paired_w1_bracket, w1
+from kinred.distance._inputs import Pts
+from kinred.distance._kernels import ctransform_numpy
+from kinred.distance._search import CTree, ctransform, knn
+from kinred.errors import InvalidInput, TooLarge
+
+
+def _dense(x, a, y, b):
+    return float(ot.emd2(a, b, cdist(x, y), numItermax=10**7))
+
+
+@st.composite
+def clouds(draw):
+    """Two weighted clouds: random or clustered, paired or not, duplicates, zero weights,
+    dimensions 1 to 50, near or far from the origin."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    d = draw(st.sampled_from([1, 2, 3, 4, 6, 8, 9, 20, 50]))
+    n = draw(st.integers(1, 90))
+    paired = draw(st.booleans())
+    m = n if paired else draw(st.integers(1, 90))
+    kind = draw(st.sampled_from(["normal", "clusters", "duplicates"]))
+    if kind == "clusters":
+        centres = rng.normal(size=(3, d)) * 5
+        x = centres[rng.integers(0, 3, n)] + 0.05 * rng.normal(size=(n, d))
+        y = centres[rng.integers(0, 3, m)] + 0.05 * rng.normal(size=(m, d))
+    else:
+        x = rng.normal(size=(n, d))
+        y = rng.normal(size=(m, d)) + 0.3
+    if kind == "duplicates":
+        x[n // 2:] = x[: n - n // 2]
+        y[: m // 3] = y[-(m // 3):] if m // 3 else y[: m // 3]
+    if paired:
+        y = x + draw(st.sampled_from([1e-3, 0.05, 1.0])) * rng.normal(size=(n, d))
+        if kind == "duplicates":
+            y[: n // 4] = x[: n // 4]              # some atoms do not move at all
+    a = rng.random(n) if draw(st.booleans()) else np.ones(n)
+    b = a.copy() if paired and draw(st.booleans()) else (rng.random(m) if draw(st.booleans())
+                                                         else np.ones(m))
+    if draw(st.booleans()):                         # zero weights (not all)
+        a[rng.random(n) < 0.3] = 0.0
+        b[rng.random(m) < 0.3] = 0.0
+        a[0], b[-1] = max(a[0], 0.1), max(b[-1], 0.1)
+    shift = draw(st.sampled_from([0.0, 1e6, -3e9]))
+    return x + shift, a / a.sum(), y + shift, b / b.sum()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(clouds(), st.sampled_from([1, 3, 8]))
+def test_bounds_hold_and_exact_means_the_dense_optimum(c, k):
+    x, a, y, b = c
+    ref = _dense(x, a, y, b)
+    with mock.patch.object(sparse_mod, "_ALL_PAIRS", 0):       # the sparse graph even when small
+        r = w1(x, y, "sparse", a=a, b=b, neighbors=k)
+        cut = w1(x, y, "sparse", a=a, b=b, neighbors=1, max_iter=1)   # a budget of one solve
+    tol = 1e-12 * ref + 1e-300
+    for res in (r, cut):
+        assert res.lower <= ref + tol and ref <= res.upper + tol
+        assert res.lower <= res.upper
+        if res.exact:
+            assert res.value == pytest.approx(ref, rel=1e-12, abs=1e-300)
+            assert res.lower == res.value == res.upper
+        else:
+            assert "NOT exact" in res.note and "because" in res.note
+    assert r.exact or r.info["iterations"] == 30 or "round-off" in r.note
+
+
+@pytest.mark.parametrize("d", [2, 4, 8])
+def test_tree_ctransform_equals_its_numpy_twin(d):
+    rng = np.random.default_rng(d)
+    X, Y = rng.normal(size=(700, d)), rng.normal(size=(900, d)) * 1.5
+    v = rng.normal(size=900) * 0.7
+    f_ref, j_ref = ctransform_numpy(X, Y, v)
+    start = np.arange(700) % 900                        # any attained values to start from
+    best = np.sqrt(((X - Y[start]) ** 2).sum(axis=1)) - v[start]
+    f, j = ctransform(X, Y, v, best, start, CTree(Y))
+    np.testing.assert_allclose(f, f_ref, rtol=1e-12, atol=1e-15)
+    vals = np.sqrt(((X - Y[j]) ** 2).sum(axis=1)) - v[j]       # j attains f
+    np.testing.assert_allclose(vals, f, rtol=1e-12, atol=1e-15)
+    fb, jb = ctransform(X, Y, v, best, start, None)            # the BLAS path (high d)
+    np.testing.assert_allclose(fb, f_ref, rtol=1e-12, atol=1e-15)
+
+
+def test_blas_ctransform_far_from_the_origin_keeps_its_digits():
+    rng = np.random.default_rng(3)
+    X = 1e6 + rng.normal(size=(300, 20)) * 1e-3
+    Y = 1e6 + rng.normal(size=(200, 20)) * 1e-3
+    v = rng.normal(size=200) * 1e-4
+    f_ref, _ = ctransform_numpy(X, Y, v)
+    f, _ = ctransform(X, Y, v, np.full(300, np.inf), np.zeros(300, np.int64), None)
+    np.testing.assert_allclose(f, f_ref, rtol=1e-12)
+
+
+def test_knn_high_dimension_matches_brute_force():
+    rng = np.random.default_rng(4)
+    X, Y = rng.normal(size=(200, 20)) + 1e5, rng.normal(size=(300, 20)) + 1e5
+    idx = knn(X, Y, 5)
+    ref = np.sort(np.argsort(cdist(X, Y), axis=1)[:, :5], axis=1)
+    assert np.array_equal(np.sort(idx, axis=1), ref)
+
+
+def test_candidate_keys_are_deduplicated():
+    """scipy's COO -> CSR sums repeated (i, j) entries: an edge listed twice would cost twice."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(400, 3))
+    y = x.copy()                                         # identity + kNN list (i, i) twice
+    keys = sparse_mod._initial_keys(x, np.full(400, 1 / 400), y, np.full(400, 1 / 400), 4, True,
+                                    rng)
+    assert np.unique(keys).size == keys.size and np.all(np.diff(keys) > 0)
+    r = w1(x, y + 0.01, "sparse")
+    assert r.exact and r.value == pytest.approx(0.01 * np.sqrt(3), rel=1e-12)
+
+
+def test_paired_clouds_exact_at_a_size_the_dense_lp_refuses():
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(20_000, 4)) * [1, 1, 0.3, 0.3]
+    t = np.array([0.003, -0.004, 0.0, 0.0])           # a translation: W1 = |t| = 0.005
+    r = w1(x, x + t, "sparse")
+    assert r.exact and r.value == pytest.approx(0.005, rel=1e-12)
+    assert r.info["edges"] > 20_000 and r.info["iterations"] >= 1
+
+
+@pytest.mark.parametrize("scale", [1e160, 1e-200])
+def test_homogeneous_rescaling(scale):
+    rng = np.random.default_rng(7)
+    x, y = rng.normal(size=(300, 3)), rng.normal(size=(250, 3)) + 0.2
+    with mock.patch.object(sparse_mod, "_ALL_PAIRS", 0):
+        r1 = w1(x, y, "sparse")
+        r2 = w1(scale * x, scale * y, "sparse")
+    assert r1.exact and r2.exact
+    assert r2.value == pytest.approx(scale * r1.value, rel=1e-12)
+
+
+def test_budget_exhausted_gives_a_certified_bracket_with_the_reason():
+    rng = np.random.default_rng(8)
+    x, y = rng.random((500, 2)), rng.random((400, 2))
+    ref = _dense(x, np.full(500, 1 / 500), y, np.full(400, 1 / 400))
+    r = w1(x, y, "sparse", neighbors=1, max_iter=1)
+    assert not r.exact and r.lower <= ref <= r.upper
+    assert "max_iter = 1" in r.note and "NOT exact" in r.note
+    with pytest.raises(InvalidInput, match="not exact"):
+        float(r)
+
+
+def test_memory_is_priced_first_and_the_refusal_names_what_fits():
+    x = np.zeros((3000, 3))
+    with pytest.raises(TooLarge, match=r"method='sparse'.*atoms per side fit"):
+        w1(x, x + 1.0, "sparse", max_bytes="1M")
+
+
+def test_sparse_validation():
+    x = np.random.default_rng(0).random((10, 2))
+    with pytest.raises(InvalidInput, match="neighbors"):
+        w1(x, x, "sparse", neighbors=0)
+    with pytest.raises(InvalidInput, match="Euclidean"):
+        w1(x, x, "sparse", metric="l1")
+    with pytest.raises(InvalidInput, match="max_iter"):
+        w1(x, x, "sparse", max_iter=0)
+    from kinred.measures import Uniform, TensorProduct
+    with pytest.raises(InvalidInput, match="two atomic"):
+        w1(TensorProduct([Uniform(0, 1)] * 2), x, "sparse")
+
+
+def test_auto_uses_sparse_beyond_the_dense_matrix():
+    rng = np.random.default_rng(9)
+    x, y = rng.random((300, 3)), rng.random((200, 3))
+    ref = w1(x, y, "exact")
+    r = w1(x, y, max_dense_bytes=1000)
+    assert r.exact and r.method == "sparse" and "auto chose sparse" in r.note
+    assert r.value == pytest.approx(ref.value, rel=1e-12)
+
+
+# ---------------------------------------------------------------- issue 21, items 9 and 10
+
+
+def test_a_bracket_does_not_pass_as_a_distance():
+    """Issue 21.9: float() of a bracket returned its midpoint silently."""
+    rng = np.random.default_rng(0)
+    x, y = rng.random((80, 3)), rng.random((70, 3))
+    br = w1(x, y, "bracket", leaf_size=20, dual_sample=30, seed=0)
+    assert not br.exact
+    with pytest.raises(InvalidInput, match=r"not exact.*\[.*\].*midpoint"):
+        float(br)
+    assert repr(br).startswith("W1Result(W1 in [") and "not exact" in repr(br)
+    assert br.midpoint == pytest.approx(0.5 * (br.lower + br.upper), rel=1e-15)
+    pb = paired_w1_bracket(x[:50], y[:50])
+    with pytest.raises(InvalidInput, match="not exact"):
+        float(pb)
+    assert "W1 in [" in repr(pb)
+    ex = w1(x, y)
+    assert float(ex) == ex.value == ex.midpoint and repr(ex).startswith("W1Result(W1 = ")
+
+
+def test_weights_with_equal_totals_are_normalized_unequal_refused():
+    """Issue 21.10: weights had to sum to one (SciPy normalizes)."""
+    from scipy.stats import wasserstein_distance
+
+    rng = np.random.default_rng(1)
+    x, y = rng.random(7), rng.random(5)
+    a, b = rng.random(7), rng.random(5)
+    a, b = 3.0 * a / a.sum(), 3.0 * b / b.sum()        # equal totals 3
+    r = w1(x, y, a=a, b=b)
+    assert r.value == pytest.approx(wasserstein_distance(x, y, a, b), rel=1e-12)
+    assert w1(x, y, a=5 * np.ones(7)).value == pytest.approx(w1(x, y).value, rel=1e-14)
+    with pytest.raises(InvalidInput, match=r"sum\(a\) = 3.0.*sum\(b\) = 6.0"):
+        w1(x, y, a=a, b=2 * b)
+    with pytest.raises(InvalidInput, match="positive finite total"):
+        w1(x, y, a=np.zeros(7))
+    assert isinstance(r, W1Result)
+
+
+@pytest.mark.parametrize("d", [3, 12])
+def test_time_budget_gives_a_certified_bracket_with_the_reason(d):
+    rng = np.random.default_rng(10)
+    x, y = rng.random((400, d)), rng.random((300, d)) + 0.1
+    ref = _dense(x, np.full(400, 1 / 400), y, np.full(300, 1 / 300))
+    r = w1(x, y, "sparse", max_seconds=0.0)
+    assert not r.exact and r.lower <= ref <= r.upper and 0 < r.lower
+    assert "max_seconds = 0" in r.note and "NOT exact" in r.note
+    if d == 3:                                     # the tree search: cut short, still a bound
+        assert "cut short for" in r.note
+
+
+def test_large_high_dimensional_problems_use_trees():
+    from kinred.distance._search import use_tree
+
+    assert use_tree(10**6, 10**6, 20) and not use_tree(2 * 10**4, 2 * 10**4, 20)
+    assert use_tree(10, 10, 8)
+
+
+def test_run_table_and_summary_state_the_certified_gap():
+    """kinred run: a time that is not exact shows its bracket and gap; summary.json's
+    ``w1_rel_gap_max`` is the largest relative gap (0 when every time is exact)."""
+    from kinred.experiments.kinetic_run import _rel_gap
+
+    r = {"lower": np.array([1.0, 0.99, 2.0]), "upper": np.array([1.0, 1.0, 2.5]),
+         "exact": np.array([True, False, False])}
+    np.testing.assert_allclose(_rel_gap(r), [0.0, 0.01, 0.2], rtol=1e-12)
+    r["exact"][:] = True
+    assert np.all(_rel_gap(r) == 0.0)
+
+
+def test_a_search_cut_short_gives_a_lower_bound_of_the_minimum():
+    from kinred.distance import _search
+
+    rng = np.random.default_rng(11)
+    X, Y = rng.normal(size=(500, 3)), rng.normal(size=(3000, 3))
+    v = rng.normal(size=3000) * 0.3
+    f_ref, _ = ctransform_numpy(X, Y, v)
+    start = np.zeros(500, np.int64)
+    best = np.sqrt(((X - Y[0]) ** 2).sum(axis=1)) - v[0]
+    opened = np.zeros(500, np.int8)
+    f, _ = ctransform(X, Y, v, best, start, CTree(Y), deadline=0.0, open_rows=opened)
+    assert 0 < opened.sum() < 500                             # some rows cut short, not all
+    assert np.all(f <= f_ref + 1e-12)                         # a bound, never above the minimum
+    np.testing.assert_allclose(f[opened == 0], f_ref[opened == 0], rtol=1e-12, atol=1e-15)
+    assert _search.LEAVES_PAST_DEADLINE == 8
