@@ -73,7 +73,7 @@ class StageStore:
         One file per finished stage (``name`` may contain ``/``), holding the digest of the
         configuration that wrote it (array ``__digest__``).
 
-    An open store owns its folder: it holds the folder's lock (:mod:`kinred._lock`, the file
+    An open store owns its folder: it holds the folder's lock (``kinred._lock``, the file
     ``.kinred.lock``) until :meth:`close` (or ``with``, or the end of the process), and another
     process opening it is refused (:class:`~kinred.errors.FolderInUse`, naming the holder).
 

@@ -19,7 +19,7 @@ Rerun
     result of another command -- is refused with :class:`~kinred.errors.InvalidInput`
     (``kinred: error: ...``, exit status 2) and left untouched.
 
-One process at a time: :func:`prepare` takes the folder's lock (:mod:`kinred._lock`, the
+One process at a time: :func:`prepare` takes the folder's lock (``kinred._lock``, the
 hidden file ``.kinred.lock`` naming the holder's pid, host, start and command line) before it
 looks at, clears or writes anything, and holds it until :func:`record` (or the end of the
 command, however it ends). A second command into a folder in use is refused with one line
@@ -187,7 +187,7 @@ def prepare(out, layout: Layout, *, resume: bool, stream=None) -> Path:
     -------
     Path
         The folder, holding the command's marker and, with ``resume``, the previous result;
-        this process holds its lock until :func:`record` (or :func:`kinred._lock.release_all`).
+        this process holds its lock until :func:`record` (or ``kinred._lock.release_all()``).
 
     Raises
     ------

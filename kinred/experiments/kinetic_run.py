@@ -380,7 +380,7 @@ def run(cfg: Config, *, out_dir=None, resume: bool = False, progress: bool | Non
         label: str | None = None, share_from=None) -> RunResult:
     """Run a scene (see the module docstring); with ``out_dir`` write the result folder.
 
-    The run owns ``out_dir`` while it runs (its lock, :mod:`kinred._lock`: another process is
+    The run owns ``out_dir`` while it runs (its lock, ``kinred._lock``: another process is
     refused with :class:`~kinred.errors.FolderInUse`). ``label`` names the progress bar
     (default ``"kinred run <scene file>"``). ``share_from``: the result folder of another run
     of the same scene (``kinred certify`` passes the ``kinred run`` folder) whose stages are
