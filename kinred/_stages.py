@@ -1,7 +1,6 @@
 """The stage store: :class:`StageStore`, the one resumable store (``kinred run``'s stages,
 ensemble members, the paper studies). Public as :class:`kinred.io.StageStore`; it lives here
-to keep :mod:`kinred.io` small, which imports it at its end (so importing ``kinred.io`` first,
-as ``import kinred`` does, defines everything this module takes from it)."""
+to keep :mod:`kinred.io` small, on the files layer (``kinred._files``) it shares with it."""
 
 from __future__ import annotations
 
@@ -17,7 +16,7 @@ import numpy as np
 
 from ._lock import FolderLock, is_lock_file
 from .errors import DamagedFile, InvalidInput, KinredWarning, StoreMismatch
-from .io import (_NPZ_DAMAGE, ResultFolder, _is_temporary, atomic_write_npz, read_npz,
+from ._files import (_NPZ_DAMAGE, ResultFolder, _is_temporary, atomic_write_npz, read_npz,
                  to_jsonable)
 
 __all__ = ["STAGE_DIGEST", "StageStore"]
