@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -268,9 +269,9 @@ def test_a_full_disk_is_its_own_error(tmp_path, monkeypatch, where):
     target = tmp_path / "r.json"
     atomic_write_json(target, {"old": 1})
     if where == "fsync":
-        monkeypatch.setattr(kio.os, "fsync", _enospc)
+        monkeypatch.setattr(os, "fsync", _enospc)
     else:
-        monkeypatch.setattr(kio.tempfile, "mkstemp", _enospc)
+        monkeypatch.setattr(tempfile, "mkstemp", _enospc)
     with pytest.raises(DiskFull) as info:
         atomic_write_json(target, {"new": 2})
     assert not isinstance(info.value, InvalidInput) and isinstance(info.value, KinredError)
@@ -290,7 +291,7 @@ def test_a_result_folder_on_a_full_disk(tmp_path, monkeypatch):
 
 def test_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, main, capsys):
     scene = _scene(tmp_path, "A.toml", 1)
-    real = kio.os.fsync
+    real = os.fsync
     calls = [0]
 
     def fsync(fd):                        # the disk fills up after a few files
@@ -299,7 +300,7 @@ def test_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, main, capsy
             _enospc()
         return real(fd)
 
-    monkeypatch.setattr(kio.os, "fsync", fsync)
+    monkeypatch.setattr(os, "fsync", fsync)
     assert main(["run", str(scene), "--out", str(tmp_path / "R"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
