@@ -65,3 +65,145 @@ def test_dense_refuses_a_workspace_beyond_the_memory_limit(monkeypatch):
         Dense().plan(Scene([Alignment(CS)]), 20000, 2)
     monkeypatch.setenv("KINRED_MAX_BYTES", "1G")
     assert Dense().plan(Scene([Alignment(CS)]), 20000, 2).n == 20000
+
+
+# ------------------------------------------------------------------ the cell list
+from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+
+from kinred.dynamics import Quadratic, SelfPropulsion  # noqa: E402
+from kinred.pairsum import CellList, tail_bound  # noqa: E402
+from kinred.pairsum import _cell_kernels, _cells  # noqa: E402
+from kinred.pairsum.cells import cutoff_radius  # noqa: E402
+
+
+def _pair_field(effects, x, v, pairsum, weights):
+    """The pair contribution to the velocity field (the local effects subtracted)."""
+    sc = Scene(effects, normalize="mean", weights=weights, pairsum=pairsum)
+    return sc.rhs(x, v)[1]
+
+
+@given(n=st.integers(2, 200), k=st.integers(1, 3), ext=st.floats(1e-3, 60.0),
+       aspect=st.lists(st.floats(0.05, 1.0), min_size=3, max_size=3),
+       offset=st.floats(-1e6, 1e6), seed=st.integers(0, 2**31 - 1),
+       la=st.floats(0.2, 3.0), soft=st.sampled_from([0.0, 0.05, 0.3]),
+       tol=st.sampled_from([1e-3, 1e-6, 1e-9]))
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_cell_list_matches_dense_on_random_clouds(n, k, ext, aspect, offset, seed, la, soft, tol):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 1.0, (n, k)) * (ext * np.array(aspect[:k])) + offset
+    v = rng.normal(size=(n, k))
+    w = rng.dirichlet(np.ones(n))
+    eff = [AttractionRepulsion(Morse(1.0, la, 1.5, 0.5 * la, soft=soft)),
+           Alignment(CuckerSmale(1.0, 2.0), on="v")]   # CS on velocities: an algebraic tail
+    got = _pair_field(eff, x, v, CellList(tol=tol), w)
+    exact = _pair_field(eff, x, v, Dense(), w)
+    assert np.linalg.norm(got - exact) <= tol * np.linalg.norm(exact) + 1e-300
+
+
+def test_cell_list_twins_and_threads_agree():
+    from kinred._parallel import num_threads
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 30, (1500, 2))
+    v = rng.normal(size=(1500, 2))
+    eff = [AttractionRepulsion(Morse(1.0, 1.0, 1.5, 0.5, soft=0.1)), SelfPropulsion(1.0, 0.5)]
+    ref = Scene(eff, pairsum=CellList(tol=1e-6, compiled=False)).rhs(x, v)[1]
+    for nt in (1, 2):
+        with num_threads(nt):
+            got = Scene(eff, pairsum=CellList(tol=1e-6)).rhs(x, v)[1]
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
+def test_cell_kernels_against_numpy_twins():
+    rng = np.random.default_rng(5)
+    for k in (1, 2, 3):
+        s = rng.uniform(0, 10, (400, k)) - 5.0
+        grid = _cells.build(s, 1.7, chunk=512)
+        # every pair within R exactly once: against the brute force
+        d2 = np.sum((s[:, None] - s[None]) ** 2, axis=2)
+        want = int(np.sum(np.triu(d2 < 1.7 ** 2, 1)))
+        got = 0
+        Z = rng.normal(size=(400, 3))
+        Zs = Z[grid.perm]                      # sorted order
+        A1, A2 = np.zeros((400, 3)), np.zeros((400, 3))
+        for items in grid.chunks:
+            bufs = [np.empty(grid.buffer, np.int64), np.empty(grid.buffer, np.int64),
+                    np.empty(grid.buffer)]
+            twin = [np.empty(grid.buffer, np.int64), np.empty(grid.buffer, np.int64),
+                    np.empty(grid.buffer)]
+            m = _cell_kernels.gather_pairs(items, grid.S, grid.start, grid.count, grid.nbr,
+                                           grid.r2, *bufs)
+            m2 = _cell_kernels.gather_pairs_numpy(items, grid.S, grid.start, grid.count,
+                                                  grid.nbr, grid.r2, *twin)
+            assert m == m2
+            for b, t in zip(bufs, twin):
+                np.testing.assert_allclose(b[:m], t[:m], rtol=1e-12)
+            phi = np.exp(-bufs[2])
+            _cell_kernels.scatter_pairs(bufs[0], bufs[1], phi, m, Zs, A1)
+            _cell_kernels.scatter_pairs_numpy(bufs[0], bufs[1], phi, m, Zs, A2)
+            got += m
+        assert got == want
+        np.testing.assert_allclose(A1, A2, rtol=1e-12, atol=1e-12 * np.abs(A2).max())
+        # the sums against the brute force (sorted order back to the original)
+        A = np.zeros((400, 3))
+        A[grid.perm] = A1
+        phi = np.where(d2 < 1.7 ** 2, np.exp(-d2), 0.0)
+        np.fill_diagonal(phi, 0.0)
+        np.testing.assert_allclose(A, phi @ Z, rtol=1e-12, atol=1e-12 * np.abs(A).max())
+
+
+def test_morse_tail_bound_bounds_the_kernel_beyond():
+    for m in (Morse(1.0, 2.0, 1.5, 0.5, soft=0.0), Morse(0.5, 2.0, 1.0, 0.5, soft=0.1),
+              Morse(2.0, 0.3, 0.1, 1.5, soft=1.0)):
+        B = tail_bound(m)
+        s = np.linspace(0.01, 40.0, 4000)
+        run = np.maximum.accumulate(np.abs(m(s))[::-1])[::-1]     # sup over s' >= s
+        assert np.all(run <= B(s) * (1 + 1e-12))
+        assert np.all(np.diff(B(s)) <= 0)
+    assert tail_bound(CS)(np.array([3.0]))[0] == pytest.approx(0.8 * 10 ** -1.5)
+    assert tail_bound(Quadratic(-2.0))(np.array([1e9]))[0] == 2.0
+    assert tail_bound(lambda s: s) is None
+
+
+def test_cutoff_radius_closed_form():
+    # B(s) = e^(-s): R = ln(1/target) exactly
+    B = lambda s: np.exp(-np.asarray(s))              # noqa: E731
+    assert cutoff_radius(B, 1e-6, 100.0) == pytest.approx(np.log(1e6), rel=1e-8)
+    assert cutoff_radius(B, 1e-6, 5.0) == 5.0         # none within the cloud: no truncation
+
+
+def test_cell_list_refuses_what_it_cannot_do():
+    with pytest.raises(InvalidInput, match="3\\^4 = 81 cells"):
+        Scene([Alignment(CS)], pairsum=CellList()).rhs(np.zeros((3, 4)), np.zeros((3, 4)))
+    with pytest.raises(InvalidInput, match="declares none"):
+        Scene([Alignment(lambda s: np.exp(-s))], pairsum=CellList()).rhs(
+            np.eye(3), np.eye(3))
+    for bad in ({"tol": 0.0}, {"tol": 1.0}, {"cutoff": -1.0}, {"compiled": "no"}):
+        with pytest.raises(InvalidInput):
+            CellList(**bad)
+
+
+def test_cell_list_fixed_cutoff_for_an_unknown_tail():
+    rng = np.random.default_rng(2)
+    x, v = rng.uniform(0, 10, (300, 2)), rng.normal(size=(300, 2))
+    eff = [Alignment(lambda s: np.exp(-s * s))]
+    got = Scene(eff, pairsum=CellList(cutoff=3.0)).rhs(x, v)[1]
+    # independent: the dense sum with the kernel cut at 3 by hand
+    cut = [Alignment(lambda s: np.where(s < 3.0, np.exp(-s * s), 0.0))]
+    np.testing.assert_allclose(got, Scene(cut).rhs(x, v)[1], rtol=1e-10, atol=1e-13)
+    assert repr(CellList(cutoff=3.0)) == "CellList(tol=1e-06, cutoff=3.0)"
+
+
+def test_cell_list_coincident_agents_and_constant_kernel():
+    x = np.zeros((5, 2))
+    v = np.arange(10.0).reshape(5, 2)
+    eff = [Alignment(CuckerSmale(1.0, 1.0))]
+    np.testing.assert_allclose(Scene(eff, pairsum=CellList()).rhs(x, v)[1],
+                               Scene(eff).rhs(x, v)[1], rtol=1e-12)
+    # Quadratic: no decay, so nothing is cut: the exact sum
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=(50, 3))
+    from kinred.dynamics import Aggregation
+    agg = [Aggregation(Quadratic(0.7))]
+    np.testing.assert_allclose(Scene(agg, pairsum=CellList()).rhs(y)[0],
+                               Scene(agg).rhs(y)[0], rtol=1e-11, atol=1e-13)

@@ -14,12 +14,17 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
   non-equispaced FFTs (finufft) for distances in ``k ≤ 3`` dimensions, ``O(N + n^k log n)``
   at a requested relative accuracy ``tol``; kernels declare ``radial_profile()``.
 
+* :class:`CellList` (``pairsum="cells"``): short-range kernels (a declared tail bound,
+  :func:`tail_bound`) truncated at a distance set from ``tol``, pairs from a cell list,
+  ``k ≤ 3``, ``O(N)`` memory.
+
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
-from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form
+from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, tail_bound
 from ._select import as_pairsum
+from .cells import CellList, CellListPlan
 from .dense import Dense, DensePlan
 from .nufft import NUFFT, NUFFTPlan, radial_profile
 from .random_batch import RandomBatch, RandomBatchPlan
@@ -27,4 +32,4 @@ from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
-           "radial_profile", "COMPILED_KINDS"]
+           "radial_profile", "COMPILED_KINDS", "CellList", "CellListPlan", "tail_bound"]

@@ -19,7 +19,7 @@ import numpy as np
 from .._validate import as_int
 from ..errors import InvalidInput
 
-__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form"]
+__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form", "tail_bound"]
 
 #: The compiled forms a kernel may declare through ``kernel.compiled_form()``, i.e. the
 #: closed forms ``φ(√q)`` of squared distances ``q`` that the dense backend evaluates inside
@@ -77,6 +77,39 @@ def compiled_form(kernel) -> tuple[str, float, float] | None:
             f"kind in {COMPILED_KINDS} and finite a, b (b a non-negative integer for "
             "'cs_halfint')")
     return (form[0], a, b)
+
+
+def tail_bound(kernel):
+    """The kernel's declared decay bound, a vectorized callable ``B(s)``, or None (unknown).
+
+    The kernel hook of the truncating backends (:class:`~kinred.pairsum.CellList`, the cost
+    model of ``pairsum="auto"``): a kernel may define ``tail_bound()`` returning a callable
+    ``B`` with ``|φ(s′)| ≤ B(s)`` for every ``s′ ≥ s`` (``B`` non-increasing; ``inf``
+    allowed), or None. Kernels without the method have an unknown tail: nothing is
+    truncated for them.
+
+    Raises
+    ------
+    InvalidInput
+        If ``tail_bound`` is not a method returning None or a callable.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Morse
+    >>> B = tail_bound(Morse(Ca=1.0, la=1.0, Cr=0.0, lr=1.0))
+    >>> round(float(B(np.array([2.0]))[0]), 6)    # e^(-2)/2
+    0.067668
+    >>> tail_bound(lambda s: s) is None
+    True
+    """
+    fn = getattr(kernel, "tail_bound", None)
+    if fn is None:
+        return None
+    bound = fn() if callable(fn) else fn
+    if bound is not None and not callable(bound):
+        raise InvalidInput(f"{kernel!r}.tail_bound must be a method returning None or a "
+                           f"vectorized callable B(s) >= |phi(s')| for s' >= s, got {bound!r}")
+    return bound
 
 
 @dataclass(frozen=True)
