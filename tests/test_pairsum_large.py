@@ -207,3 +207,64 @@ def test_cell_list_coincident_agents_and_constant_kernel():
     agg = [Aggregation(Quadratic(0.7))]
     np.testing.assert_allclose(Scene(agg, pairsum=CellList()).rhs(y)[0],
                                Scene(agg).rhs(y)[0], rtol=1e-11, atol=1e-13)
+
+
+# ------------------------------------------------------------------ pairsum="auto"
+from kinred.pairsum import Auto, as_pairsum  # noqa: E402
+
+CASES = [  # name, n, k, extents, effects, expected choice
+    ("few agents", 500, 2, (1, 1), [Alignment(CS)], "dense"),
+    ("compact 2-D CS", 100_000, 2, (1, 1), [Alignment(CS)], "nufft"),
+    ("spread short-range Morse", 100_000, 2, (1000, 1000),
+     [AttractionRepulsion(Morse(0.5, 1.0, 1.0, 0.5, soft=0.1))], "cells"),
+    ("short Morse along a 1-D line", 100_000, 1, (5000,),
+     [AttractionRepulsion(Morse(0.5, 1.0, 1.0, 0.5, soft=0.0))], "cells"),
+    ("high dimension", 20_000, 10, (1,) * 10, [Alignment(CS)], "dense"),
+    ("compact 3-D CS", 50_000, 3, (1, 1, 1), [Alignment(CS)], "nufft"),
+]
+
+
+@pytest.mark.parametrize("name,n,k,ext,effects,want", CASES, ids=[c[0] for c in CASES])
+def test_auto_choice_on_a_table_of_cases(name, n, k, ext, effects, want):
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 1, (n, k)) * np.array(ext) + 1e3
+    v = rng.normal(size=(n, k))
+    sc = Scene(effects, pairsum="auto")
+    plan = sc._plan(n, k)
+    got = sc.pairsum.choose(plan, x, v)
+    assert got == want, plan.info()
+    est = plan.info()["estimates"]
+    assert est[got] == min(est.values()) and "random_batch" not in est
+
+
+def test_auto_runs_says_what_it_chose_and_redecides():
+    rng = np.random.default_rng(1)
+    eff = [AttractionRepulsion(Morse(0.5, 1.0, 1.0, 0.5, soft=0.1))]
+    x, v = rng.uniform(0, 1, (600, 2)), rng.normal(size=(600, 2))
+    sc = Scene(eff, pairsum=Auto(tol=1e-8))
+    f = sc.rhs(x, v)[1]
+    info = sc.info()
+    assert info["backend"] == "Auto(tol=1e-08)" and info["pairsum"]["chosen"] == "dense"
+    np.testing.assert_allclose(f, Scene(eff).rhs(x, v)[1], rtol=1e-12)
+    sc.rhs(x * 1.1, v)                      # same shape (within 25 %): no new decision
+    assert sc.info()["pairsum"]["decisions"] == 1
+    sc.rhs(x * 3.0, v)
+    assert sc.info()["pairsum"]["decisions"] == 2
+    assert as_pairsum("auto").tol == 1e-6 and repr(as_pairsum("auto")) == "Auto(tol=1e-06)"
+
+
+def test_auto_refuses_what_nothing_deterministic_fits():
+    sc = Scene([Alignment(CS)], pairsum="auto")
+    plan = sc._plan(10**7, 10)
+    with pytest.raises(TooLarge, match="no deterministic backend.*random_batch"):
+        sc.pairsum.choose(plan, np.zeros((10**7, 10)))
+
+
+def test_run_header_says_auto_chooses():
+    from types import SimpleNamespace
+
+    from kinred.commands.run import _backend_text
+
+    text = _backend_text(SimpleNamespace(pairsum=("auto", {"tol": 1e-8}), precision="double"))
+    assert text == ("auto pair sums (tol=1e-08, chosen per system among dense, nufft, cells by "
+                    "estimated cost), precision double")

@@ -18,12 +18,17 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
   :func:`tail_bound`) truncated at a distance set from ``tol``, pairs from a cell list,
   ``k ≤ 3``, ``O(N)`` memory.
 
+* :class:`Auto` (``pairsum="auto"``): the deterministic backend (Dense, NUFFT, CellList) of
+  least estimated cost for the scene and the cloud, re-chosen when the cloud changes shape,
+  said by ``Scene.info()``; never RandomBatch.
+
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
 from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, tail_bound
 from ._select import as_pairsum
+from .auto import Auto, AutoPlan
 from .cells import CellList, CellListPlan
 from .dense import Dense, DensePlan
 from .nufft import NUFFT, NUFFTPlan, radial_profile
@@ -32,4 +37,4 @@ from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
-           "radial_profile", "COMPILED_KINDS", "CellList", "CellListPlan", "tail_bound"]
+           "radial_profile", "COMPILED_KINDS", "CellList", "CellListPlan", "tail_bound", "Auto", "AutoPlan"]

@@ -279,21 +279,40 @@ def _strengths(z: np.ndarray, c: np.ndarray) -> tuple:
     return zt, packed
 
 
+def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
+    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built):
+    a :class:`_fastsum.Grid`, None when the kernel vanishes on every difference, or
+    ``"nan"`` for a non-finite cloud.
+
+    Raises
+    ------
+    TooLarge
+        The cloud needs more than ``plan.max_modes`` modes at ``plan.tol``.
+    """
+    lo = s.min(axis=0) if lo is None else lo
+    hi = s.max(axis=0) if hi is None else hi
+    ext = hi - lo
+    if not np.all(np.isfinite(ext)):
+        return "nan"
+    grid = g.grid
+    if grid is None or not grid.fits(ext):
+        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+        if kinf == 0.0:                      # the kernel vanishes on every difference
+            return None
+        grid = _fastsum.build_grid(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes, g.name)
+        g.grid, g.builds = grid, g.builds + 1
+    return grid
+
+
 def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
                strengths: np.ndarray) -> np.ndarray:
     """``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` of one group, ``(n, d)``, fresh."""
     n, d = zt.shape
     lo, hi = s.min(axis=0), s.max(axis=0)
-    ext = hi - lo
-    if not np.all(np.isfinite(ext)):        # a diverging state: let the integrator's guard see it
-        return np.full((n, d), np.nan)
-    grid = g.grid
-    if grid is None or not grid.fits(ext):
-        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
-        if kinf == 0.0:                      # the kernel vanishes on every difference
-            return np.zeros((n, d))
-        grid = _fastsum.build_grid(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes, g.name)
-        g.grid, g.builds = grid, g.builds + 1
+    grid = ensure_grid(plan, g, s, lo, hi)
+    if grid is None or isinstance(grid, str):
+        # a diverging state (let the integrator's guard see it), or a vanishing kernel
+        return np.full((n, d), np.nan) if grid == "nan" else np.zeros((n, d))
     if g.fast is None or not g.fast.matches(grid, n):
         g.fast = None                        # release the old plan's memory first
         g.fast = _fastsum.FastSum(grid, n, strengths.shape[0], plan.nthreads)

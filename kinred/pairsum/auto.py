@@ -1,0 +1,226 @@
+r"""``pairsum="auto"``: the deterministic backend of least estimated cost for the cloud at hand.
+
+:class:`Auto` chooses, per scene and state shape, among the deterministic backends – the
+exact :class:`~kinred.pairsum.Dense`, :class:`~kinred.pairsum.NUFFT` (smooth kernels,
+``k ≤ 3``) and :class:`~kinred.pairsum.CellList` (kernels with a declared decay, ``k ≤ 3``),
+the latter two at the requested ``tol`` – by a cost model of one right-hand side
+(:func:`costs`) from ``N``, ``k``, the cloud's extents and pair distances and the kernels;
+it never picks :class:`~kinred.pairsum.RandomBatch` (an approximation of another kind, which
+stays explicit). The choice is re-made when the cloud's extents leave ``[1/1.25, 1.25]``
+times those it was made for, and it is said: :meth:`AutoPlan.info`, ``Scene.info()``.
+
+The cost model (seconds, rates measured on the 2-core development VM, per engine thread):
+
+* Dense: ``N(N − 1)/2`` pairs per distance source at :data:`DENSE_RATE` (compiled kernels)
+  or :data:`DENSE_RATE_NUMPY` pairs per second, times ``max(1, (d + 1)/4)``;
+* CellList: the pairs within the cutoff (from 4096 sampled pairs) at
+  :data:`CELL_PAIR_SECONDS` each and the candidates of the stencil at
+  :data:`CELL_CANDIDATE_SECONDS` each;
+* NUFFT: its grids are built for the cloud (kept if it is chosen); per group and transform
+  ``2 N wᵏ`` spreading operations (``w = ⌈log₁₀(1/ε)⌉ + 1``) at :data:`SPREAD_SECONDS` and
+  FFTs of ``2ᵏ`` times the modes at :data:`FFT_SECONDS` per point and ``log₂``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validate import as_float
+from .. import _parallel
+from ..errors import InvalidInput, TooLarge
+from . import _fastsum
+from ._base import PairTerms, check_plan_args
+from .cells import TRUNC_FACTOR, CellList, cutoff_radius
+from .dense import Dense
+from .nufft import NUFFT, ensure_grid
+
+__all__ = ["Auto", "AutoPlan", "costs"]
+
+DENSE_RATE = 4e8
+DENSE_RATE_NUMPY = 8e7
+CELL_PAIR_SECONDS = 8e-8
+CELL_CANDIDATE_SECONDS = 3e-8
+SPREAD_SECONDS = 1e-9
+FFT_SECONDS = 5e-9
+#: Fixed overheads per right-hand side (Python calls, plans, sorting setup).
+OVERHEAD = {"dense": 0.0, "nufft": 2e-3, "cells": 1e-3}
+REDECIDE = 1.25
+_SEED = 0xA070
+
+
+@dataclass(eq=False)
+class AutoPlan:
+    """The candidate backends' plans for one scene and shape, and the current choice."""
+
+    n: int
+    dim: int
+    terms: PairTerms
+    candidates: dict            # name -> (backend, plan or None, reason it cannot run)
+    chosen: str | None = None
+    estimates: dict = field(default_factory=dict)
+    ext: dict | None = None
+    decisions: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def info(self) -> dict:
+        """What was chosen, the estimated seconds per right-hand side of each candidate
+        (``inf``: it cannot run this scene or cloud, with the reason), and how many times
+        the choice was made."""
+        return {"chosen": self.chosen, "estimates": dict(self.estimates),
+                "decisions": self.decisions,
+                "excluded": {k: v[2] for k, v in self.candidates.items() if v[2]}}
+
+
+class Auto:
+    """Automatic choice of a deterministic pair-sum backend (``pairsum="auto"``).
+
+    Parameters
+    ----------
+    tol : float
+        The accuracy asked of the approximate candidates (NUFFT, CellList), ``0 < tol < 1``.
+        Dense is exact.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Alignment, CuckerSmale, Scene
+    >>> sc = Scene([Alignment(CuckerSmale(0.8, 1.5))], pairsum="auto")
+    >>> x = np.random.default_rng(0).uniform(0, 1, (200, 2))
+    >>> _ = sc.rhs(x, x)
+    >>> sc.info()["pairsum"]["chosen"]      # small N: the exact sum is cheapest
+    'dense'
+    """
+
+    precision = "double"
+
+    def __init__(self, tol: float = 1e-6):
+        self.tol = as_float(tol, "tol", low=0.0, high=1.0, low_open=True, high_open=True)
+
+    def __repr__(self) -> str:
+        return f"Auto(tol={self.tol!r})"
+
+    def plan(self, scene, n: int, dim: int) -> AutoPlan:
+        """The candidates' plans (a candidate that cannot run the scene is kept with why)."""
+        terms, n, dim = check_plan_args(scene, n, dim)
+        cands = {}
+        for name, backend in (("dense", Dense()), ("nufft", NUFFT(tol=self.tol)),
+                              ("cells", CellList(tol=self.tol))):
+            try:
+                cands[name] = (backend, backend.plan(scene, n, dim), "")
+            except (InvalidInput, TooLarge) as exc:
+                cands[name] = (backend, None, str(exc))
+        return AutoPlan(n=n, dim=dim, terms=terms, candidates=cands)
+
+    def evaluate(self, plan: AutoPlan, x: np.ndarray, v: np.ndarray | None, rng=None) -> dict:
+        """The chosen backend's pair sums (the choice re-made when the cloud changed shape)."""
+        if not isinstance(plan, AutoPlan) or x.shape != (plan.n, plan.dim):
+            raise InvalidInput(f"plan must be an AutoPlan for states of shape (n, dim) = "
+                               f"{getattr(plan, 'n', '?'), getattr(plan, 'dim', '?')}; got "
+                               f"{type(plan).__name__} and x of shape {x.shape}")
+        name = self.choose(plan, x, v)
+        backend, sub, _ = plan.candidates[name]
+        return backend.evaluate(sub, x, v, rng)
+
+    def choose(self, plan: AutoPlan, x: np.ndarray, v: np.ndarray | None = None) -> str:
+        """The backend for the state ``(x, v)``: the last choice while the cloud keeps its
+        shape, else the candidate of least estimated cost (:func:`costs`; Dense on ties).
+
+        Raises
+        ------
+        TooLarge
+            No candidate can run it (e.g. ``N = 10⁷`` in dimension 10), naming why.
+        """
+        if all(c[1] is None for c in plan.candidates.values()):
+            _refuse(plan)                    # before touching the state
+        state = {"x": x, "v": v}
+        with plan.lock:
+            ext = {s: np.ptp(state[s], axis=0) for s in plan.terms.sources}
+            if plan.chosen is None or not _same_shape(ext, plan.ext):
+                plan.estimates = costs(plan, state)
+                plan.chosen = min(plan.estimates, key=lambda k: (plan.estimates[k], k != "dense"))
+                plan.ext, plan.decisions = ext, plan.decisions + 1
+                if not math.isfinite(plan.estimates[plan.chosen]):
+                    _refuse(plan)
+            return plan.chosen
+
+
+def _same_shape(ext: dict, old: dict | None) -> bool:
+    if old is None:
+        return False
+    return all(np.all(ext[s] <= REDECIDE * old[s]) and np.all(ext[s] >= old[s] / REDECIDE)
+               for s in ext)
+
+
+def _refuse(plan: AutoPlan) -> None:
+    why = "; ".join(f"{k}: {v[2]}" for k, v in plan.candidates.items() if v[2])
+    raise TooLarge(f"pairsum='auto': no deterministic backend fits {plan.n} agents in "
+                   f"dimension {plan.dim} ({why}); project the scene to k <= 3, or ask for "
+                   "pairsum='random_batch' (an unbiased approximation, explicit only)")
+
+
+def costs(plan: AutoPlan, state: dict) -> dict:
+    """Estimated seconds of one right-hand side per candidate (``inf``: cannot run)."""
+    n, dim, terms = plan.n, plan.dim, plan.terms
+    nt = max(1, _parallel.get_num_threads())
+    out = {}
+    rate = DENSE_RATE if all(t.compiled is not None for t in terms.terms) else DENSE_RATE_NUMPY
+    out["dense"] = math.inf if plan.candidates["dense"][1] is None else (len(terms.sources) * n * (n - 1) / 2.0 * max(1.0, (dim + 1) / 4.0)
+                    / (rate * nt))
+    out["nufft"] = _nufft_cost(plan, state, nt)
+    out["cells"] = _cells_cost(plan, state, nt)
+    return {k: (v + OVERHEAD[k] if math.isfinite(v) else v) for k, v in out.items()}
+
+
+def _nufft_cost(plan: AutoPlan, state: dict, nt: int) -> float:
+    backend, sub, why = plan.candidates["nufft"]
+    if sub is None or plan.dim > 3:
+        return math.inf
+    total = 0.0
+    for g in sub.groups:
+        try:
+            grid = ensure_grid(sub, g, np.asarray(state[g.source], dtype=float))
+        except TooLarge as exc:
+            plan.candidates["nufft"] = (backend, sub, str(exc))
+            return math.inf
+        if grid is None or isinstance(grid, str):
+            continue
+        k = plan.dim
+        w = math.ceil(math.log10(1.0 / grid.eps)) + 1
+        ntrans = (plan.dim + 2) // 2
+        fine = (2 ** k) * math.prod(grid.modes)
+        total += ntrans * (2 * plan.n * w ** k * SPREAD_SECONDS
+                           + 2 * fine * math.log2(max(fine, 2)) * FFT_SECONDS)
+    plan.candidates["nufft"] = (backend, sub, "")
+    return total / nt
+
+
+def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
+    backend, sub, why = plan.candidates["cells"]
+    if sub is None:
+        return math.inf
+    n, k = plan.n, plan.dim
+    rng = np.random.default_rng(_SEED)
+    total = 0.0
+    for src in sub.sources:
+        s = np.asarray(state[src.name], dtype=float)
+        ext = np.ptp(s, axis=0)
+        dmax = float(np.sqrt(np.sum(ext * ext)))
+        R = 0.0
+        for t, bound in zip(src.terms, src.bounds):
+            kinf, kappa = _fastsum.kernel_scales(t.kernel, s, ext, repr(t.kernel))
+            if kinf > 0.0 and dmax > 0.0:
+                R = max(R, cutoff_radius(bound, TRUNC_FACTOR * sub.tol * kappa, dmax))
+        if R == 0.0:
+            continue
+        i, j = rng.integers(0, n, (2, 4096))
+        frac = float(np.mean(np.sum((s[i] - s[j]) ** 2, axis=1) < R * R))
+        pairs = max(frac, 1.0 / 4096) * n * (n - 1) / 2.0
+        ratio = {1: 1.5, 2: 2.9, 3: 6.5}[k]
+        cand = min(n * (n - 1) / 2.0, pairs * ratio)
+        total += len(src.terms) * pairs * CELL_PAIR_SECONDS + cand * CELL_CANDIDATE_SECONDS
+    return total / nt
+
+
