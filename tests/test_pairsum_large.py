@@ -217,8 +217,10 @@ CASES = [  # name, n, k, extents, effects, expected choice
     ("compact 2-D CS", 100_000, 2, (1, 1), [Alignment(CS)], "nufft"),
     ("spread short-range Morse", 100_000, 2, (1000, 1000),
      [AttractionRepulsion(Morse(0.5, 1.0, 1.0, 0.5, soft=0.1))], "cells"),
-    ("short Morse along a 1-D line", 100_000, 1, (5000,),
+    ("spread unsoftened Morse", 100_000, 2, (1000, 1000),
      [AttractionRepulsion(Morse(0.5, 1.0, 1.0, 0.5, soft=0.0))], "cells"),
+    ("compact unsoftened Morse: near field", 20_000, 2, (5, 5),
+     [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=0.0))], "nufft"),
     ("high dimension", 20_000, 10, (1,) * 10, [Alignment(CS)], "dense"),
     ("compact 3-D CS", 50_000, 3, (1, 1, 1), [Alignment(CS)], "nufft"),
 ]
@@ -268,3 +270,70 @@ def test_run_header_says_auto_chooses():
     text = _backend_text(SimpleNamespace(pairsum=("auto", {"tol": 1e-8}), precision="double"))
     assert text == ("auto pair sums (tol=1e-08, chosen per system among dense, nufft, cells by "
                     "estimated cost), precision double")
+
+
+# ------------------------------------------------------------------ NUFFT near field
+from kinred.pairsum import NUFFT  # noqa: E402
+from kinred.pairsum import _nearfield  # noqa: E402
+
+
+@given(n=st.integers(30, 400), k=st.integers(1, 3), ext=st.floats(0.5, 8.0),
+       aspect=st.lists(st.floats(0.2, 1.0), min_size=3, max_size=3),
+       offset=st.floats(-1e4, 1e4), seed=st.integers(0, 2**31 - 1),
+       soft=st.sampled_from([0.0, 0.02, 0.1]), tol=st.sampled_from([1e-3, 1e-6]))
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_nufft_near_field_matches_dense_on_random_clouds(n, k, ext, aspect, offset, seed, soft,
+                                                         tol):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 1.0, (n, k)) * (ext * np.array(aspect[:k])) + offset
+    v = rng.normal(size=(n, k))
+    w = rng.dirichlet(np.ones(n))
+    eff = [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=soft))]
+    sc = Scene(eff, normalize="mean", weights=w, pairsum=NUFFT(tol=tol, near_field=True))
+    got = sc.rhs(x, v)[1]
+    exact = _pair_field(eff, x, v, Dense(), w)
+    assert np.linalg.norm(got - exact) <= tol * np.linalg.norm(exact)
+    info = sc.info()["pairsum"][0]
+    assert info["near_radius"] > 0 and info["near_pairs"] >= 0
+
+
+def test_unsoftened_morse_runs_with_the_near_field():
+    """Morse with soft = 0 (u ~ 1/s) has no smooth profile: the cusp goes to the near part."""
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0, 5, (3000, 2)) + 100.0
+    v = rng.normal(size=(3000, 2))
+    eff = [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=0.0))]
+    sc = Scene(eff, pairsum=NUFFT(tol=1e-6, near_field=None))
+    got = sc.rhs(x, v)[1]
+    exact = Scene(eff).rhs(x, v)[1]
+    assert np.linalg.norm(got - exact) <= 1e-6 * np.linalg.norm(exact)
+    assert sc.info()["pairsum"][0]["near_radius"] is not None
+    with pytest.raises(InvalidInput, match="smooth radial profile"):
+        Scene(eff, pairsum=NUFFT()).rhs(x, v)          # the default: no split
+    assert repr(NUFFT(near_field=True)) == "NUFFT(tol=1e-06, near_field=True)"
+    assert repr(NUFFT(near_field=None)) == "NUFFT(tol=1e-06, near_field=None)"
+    with pytest.raises(InvalidInput, match="near_field"):
+        NUFFT(near_field="yes")
+
+
+def test_far_part_is_the_kernel_beyond_the_near_radius_and_bounded_inside():
+    m = Morse(0.5, 2.0, 1.0, 0.5, soft=0.0)
+    tau = 1e-9
+    phi_f = _nearfield.far_profile(m, 1.0, tau)
+    s = np.linspace(1.0, 20.0, 500)
+    # beyond ε_I: φ_F = G φ with 1 − G ≤ τ
+    assert np.all(np.abs(phi_f(s) - m(s)) <= tau * np.abs(m(s)) * (1 + 1e-6))
+    inside = phi_f(np.linspace(0.0, 1.0, 500))
+    assert np.all(np.isfinite(inside))
+    assert np.max(np.abs(inside)) <= np.max(np.abs(m(np.array([0.25]))))   # clamped at a
+    near = _nearfield.near_kernel((m,), phi_f)
+    q = np.linspace(0.01, 4.0, 50) ** 2
+    np.testing.assert_allclose(near(q) + phi_f(np.sqrt(q)), m(np.sqrt(q)), rtol=1e-12)
+
+
+def test_near_field_split_error_is_clear_when_nothing_fits():
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 3, (500, 3))
+    eff = [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=0.0))]
+    with pytest.raises(TooLarge, match="near-field split.*max_modes=1000"):
+        Scene(eff, pairsum=NUFFT(tol=1e-8, max_modes=1000, near_field=None)).rhs(x, x)

@@ -9,16 +9,10 @@ it never picks :class:`~kinred.pairsum.RandomBatch` (an approximation of another
 stays explicit). The choice is re-made when the cloud's extents leave ``[1/1.25, 1.25]``
 times those it was made for, and it is said: :meth:`AutoPlan.info`, ``Scene.info()``.
 
-The cost model (seconds, rates measured on the 2-core development VM, per engine thread):
-
-* Dense: ``N(N − 1)/2`` pairs per distance source at :data:`DENSE_RATE` (compiled kernels)
-  or :data:`DENSE_RATE_NUMPY` pairs per second, times ``max(1, (d + 1)/4)``;
-* CellList: the pairs within the cutoff (from 4096 sampled pairs) at
-  :data:`CELL_PAIR_SECONDS` each and the candidates of the stencil at
-  :data:`CELL_CANDIDATE_SECONDS` each;
-* NUFFT: its grids are built for the cloud (kept if it is chosen); per group and transform
-  ``2 N wᵏ`` spreading operations (``w = ⌈log₁₀(1/ε)⌉ + 1``) at :data:`SPREAD_SECONDS` and
-  FFTs of ``2ᵏ`` times the modes at :data:`FFT_SECONDS` per point and ``log₂``.
+The cost model (seconds per right-hand side, :mod:`kinred.pairsum._cost`): Dense by its
+pairs; CellList by the pairs within its cutoff (their fraction among 4096 sampled pairs) and
+the candidates of its stencil; NUFFT by its transforms, with its grids built for the cloud
+(kept if it is chosen) – including the near-field split when a kernel needs one.
 """
 
 from __future__ import annotations
@@ -32,7 +26,7 @@ import numpy as np
 from .._validate import as_float
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
-from . import _fastsum
+from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args
 from .cells import TRUNC_FACTOR, CellList, cutoff_radius
 from .dense import Dense
@@ -40,12 +34,6 @@ from .nufft import NUFFT, ensure_grid
 
 __all__ = ["Auto", "AutoPlan", "costs"]
 
-DENSE_RATE = 4e8
-DENSE_RATE_NUMPY = 8e7
-CELL_PAIR_SECONDS = 8e-8
-CELL_CANDIDATE_SECONDS = 3e-8
-SPREAD_SECONDS = 1e-9
-FFT_SECONDS = 5e-9
 #: Fixed overheads per right-hand side (Python calls, plans, sorting setup).
 OVERHEAD = {"dense": 0.0, "nufft": 2e-3, "cells": 1e-3}
 REDECIDE = 1.25
@@ -106,7 +94,7 @@ class Auto:
         """The candidates' plans (a candidate that cannot run the scene is kept with why)."""
         terms, n, dim = check_plan_args(scene, n, dim)
         cands = {}
-        for name, backend in (("dense", Dense()), ("nufft", NUFFT(tol=self.tol)),
+        for name, backend in (("dense", Dense()), ("nufft", NUFFT(tol=self.tol, near_field=None)),
                               ("cells", CellList(tol=self.tol))):
             try:
                 cands[name] = (backend, backend.plan(scene, n, dim), "")
@@ -165,10 +153,10 @@ def costs(plan: AutoPlan, state: dict) -> dict:
     """Estimated seconds of one right-hand side per candidate (``inf``: cannot run)."""
     n, dim, terms = plan.n, plan.dim, plan.terms
     nt = max(1, _parallel.get_num_threads())
-    out = {}
-    rate = DENSE_RATE if all(t.compiled is not None for t in terms.terms) else DENSE_RATE_NUMPY
-    out["dense"] = math.inf if plan.candidates["dense"][1] is None else (len(terms.sources) * n * (n - 1) / 2.0 * max(1.0, (dim + 1) / 4.0)
-                    / (rate * nt))
+    out = {"dense": math.inf}
+    if plan.candidates["dense"][1] is not None:
+        out["dense"] = _cost.dense_seconds(
+            n, dim, len(terms.sources), all(t.compiled is not None for t in terms.terms)) / nt
     out["nufft"] = _nufft_cost(plan, state, nt)
     out["cells"] = _cells_cost(plan, state, nt)
     return {k: (v + OVERHEAD[k] if math.isfinite(v) else v) for k, v in out.items()}
@@ -176,25 +164,30 @@ def costs(plan: AutoPlan, state: dict) -> dict:
 
 def _nufft_cost(plan: AutoPlan, state: dict, nt: int) -> float:
     backend, sub, why = plan.candidates["nufft"]
-    if sub is None or plan.dim > 3:
+    if sub is None:
         return math.inf
     total = 0.0
     for g in sub.groups:
+        s = np.asarray(state[g.source], dtype=float)
         try:
-            grid = ensure_grid(sub, g, np.asarray(state[g.source], dtype=float))
+            grid = ensure_grid(sub, g, s)
         except TooLarge as exc:
             plan.candidates["nufft"] = (backend, sub, str(exc))
             return math.inf
         if grid is None or isinstance(grid, str):
             continue
-        k = plan.dim
-        w = math.ceil(math.log10(1.0 / grid.eps)) + 1
-        ntrans = (plan.dim + 2) // 2
-        fine = (2 ** k) * math.prod(grid.modes)
-        total += ntrans * (2 * plan.n * w ** k * SPREAD_SECONDS
-                           + 2 * fine * math.log2(max(fine, 2)) * FFT_SECONDS)
+        total += _cost.nufft_seconds(plan.n, plan.dim, math.prod(grid.modes), grid.eps, plan.dim)
+        if g.split is not None:
+            frac = float(np.mean(_pair_d2(s) < g.split.radius ** 2))
+            total += _cost.cell_seconds(frac * plan.n * (plan.n - 1) / 2.0, plan.dim)
     plan.candidates["nufft"] = (backend, sub, "")
     return total / nt
+
+
+def _pair_d2(s: np.ndarray) -> np.ndarray:
+    """Squared distances of 4096 pairs drawn with a fixed seed."""
+    i, j = np.random.default_rng(_SEED).integers(0, s.shape[0], (2, 4096))
+    return np.sum((s[i] - s[j]) ** 2, axis=1)
 
 
 def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
@@ -202,7 +195,6 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
     if sub is None:
         return math.inf
     n, k = plan.n, plan.dim
-    rng = np.random.default_rng(_SEED)
     total = 0.0
     for src in sub.sources:
         s = np.asarray(state[src.name], dtype=float)
@@ -215,12 +207,6 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
                 R = max(R, cutoff_radius(bound, TRUNC_FACTOR * sub.tol * kappa, dmax))
         if R == 0.0:
             continue
-        i, j = rng.integers(0, n, (2, 4096))
-        frac = float(np.mean(np.sum((s[i] - s[j]) ** 2, axis=1) < R * R))
-        pairs = max(frac, 1.0 / 4096) * n * (n - 1) / 2.0
-        ratio = {1: 1.5, 2: 2.9, 3: 6.5}[k]
-        cand = min(n * (n - 1) / 2.0, pairs * ratio)
-        total += len(src.terms) * pairs * CELL_PAIR_SECONDS + cand * CELL_CANDIDATE_SECONDS
+        frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)
+        total += _cost.cell_seconds(frac * n * (n - 1) / 2.0, k, len(src.terms))
     return total / nt
-
-

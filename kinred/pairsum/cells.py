@@ -132,8 +132,8 @@ class CellList:
     >>> rng = np.random.default_rng(0)
     >>> x = rng.uniform(0, 40, (400, 2))
     >>> eff = [AttractionRepulsion(Morse(1.0, 1.0, 1.5, 0.5, soft=0.1))]
-    >>> fast = Scene(eff, pairsum=CellList(tol=1e-8)).rhs(x)[0]
-    >>> exact = Scene(eff).rhs(x)[0]
+    >>> fast = Scene(eff, pairsum=CellList(tol=1e-8)).rhs(x, x)[1]
+    >>> exact = Scene(eff).rhs(x, x)[1]
     >>> bool(np.linalg.norm(fast - exact) <= 1e-8 * np.linalg.norm(exact))
     True
     """
