@@ -37,6 +37,9 @@ __all__ = ["Auto", "AutoPlan", "costs"]
 #: Fixed overheads per right-hand side (Python calls, plans, sorting setup).
 OVERHEAD = {"dense": 0.0, "nufft": 2e-3, "cells": 1e-3}
 REDECIDE = 1.25
+#: Dense estimated below this many seconds is chosen without estimating the others (their
+#: estimates would build NUFFT grids, which costs more than such a right-hand side).
+DENSE_ENOUGH = 0.02
 _SEED = 0xA070
 
 
@@ -157,6 +160,9 @@ def costs(plan: AutoPlan, state: dict) -> dict:
     if plan.candidates["dense"][1] is not None:
         out["dense"] = _cost.dense_seconds(
             n, dim, len(terms.sources), all(t.compiled is not None for t in terms.terms)) / nt
+    if out["dense"] <= DENSE_ENOUGH:     # nothing to gain: do not build the others' grids
+        out["nufft"] = out["cells"] = math.inf
+        return out
     out["nufft"] = _nufft_cost(plan, state, nt)
     out["cells"] = _cells_cost(plan, state, nt)
     return {k: (v + OVERHEAD[k] if math.isfinite(v) else v) for k, v in out.items()}
