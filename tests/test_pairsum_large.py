@@ -337,3 +337,25 @@ def test_near_field_split_error_is_clear_when_nothing_fits():
     eff = [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=0.0))]
     with pytest.raises(TooLarge, match="near-field split.*max_modes=1000"):
         Scene(eff, pairsum=NUFFT(tol=1e-8, max_modes=1000, near_field=None)).rhs(x, x)
+
+
+def test_nufft_periods_follow_a_flat_cloud(monkeypatch):
+    """Per-axis periods: a 2-D strip 40 × 0.4 gets far fewer modes across than along, within
+    tol of the exact sum; with the old aspect floor (1/8) the thin axis had many more."""
+    from kinred.pairsum import _fastsum
+
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 1, (800, 2)) * np.array([40.0, 0.4]) + 1e3
+    v = rng.normal(size=(800, 2))
+    eff = [Alignment(CuckerSmale(0.8, 1.5))]
+    exact = Scene(eff).rhs(x, v)[1]
+    modes = {}
+    default = _fastsum.MIN_ASPECT
+    for floor in (8.0, default):
+        monkeypatch.setattr(_fastsum, "MIN_ASPECT", floor)
+        sc = Scene(eff, pairsum=NUFFT(tol=1e-6))
+        got = sc.rhs(x, v)[1]
+        assert np.linalg.norm(got - exact) <= 1e-6 * np.linalg.norm(exact)
+        modes[floor] = sc.info()["pairsum"][0]["modes"]
+    assert modes[default][1] < modes[8.0][1]          # the default floor is lower than 1/8
+    assert np.prod(modes[default]) < np.prod(modes[8.0])
