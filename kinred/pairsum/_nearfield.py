@@ -61,28 +61,40 @@ class Split:
     tau: float
 
 
-def far_profile(phi, eps_i: float, tau: float):
-    """``s ↦ φ_F(s)`` for the near radius ``eps_i`` (module notes)."""
+def _transition(eps_i: float, tau: float):
+    """``(a, G)``: the start of the regularized region and the transition ``s ↦ G(s)``."""
     a = A_FRACTION * eps_i
     mid = 0.5 * (a + eps_i)
-    sigma = (eps_i - a) / (2.0 * float(erfcinv(2.0 * tau)))
+    sigma = _sigma(eps_i, tau)
+    return a, lambda s: 0.5 * erfc((mid - s) / sigma)
+
+
+def far_profile(phi, eps_i: float, tau: float):
+    """``s ↦ φ_F(s)`` for the near radius ``eps_i`` (module notes)."""
+    a, G = _transition(eps_i, tau)
 
     def phi_f(s):
         s = np.asarray(s, dtype=np.float64)
-        return 0.5 * erfc((mid - s) / sigma) * np.asarray(phi(np.maximum(s, a)), dtype=np.float64)
+        return G(s) * np.asarray(phi(np.maximum(s, a)), dtype=np.float64)
 
+    phi_f.eps_i, phi_f.tau = eps_i, tau
     return phi_f
 
 
 def near_kernel(kernels: tuple, phi_f):
-    """``q ↦ Σ φ_t(√q) − φ_F(√q)``: the exact kernels (their ``value_sq``) minus the far part."""
+    """``q ↦ Σ φ_t(√q) − φ_F(√q)``: the exact kernels (their ``value_sq``) minus the far part,
+    ``φ(s)(1 − G(s))`` for ``s ≥ a`` and ``φ(s) − G(s) φ(a)`` below (one kernel evaluation)."""
     vals = [kernel_values(k) for k in kernels]
+    a, G = _transition(phi_f.eps_i, phi_f.tau)
+    phi_a = float(sum(v(np.array([a * a]))[0] for v in vals))
 
     def phi_n(q):
         out = vals[0](q)
         for v in vals[1:]:
             out = out + v(q)
-        return out - phi_f(np.sqrt(q))
+        s = np.sqrt(q)
+        g = G(s)
+        return np.where(s >= a, out * (1.0 - g), out - g * phi_a)
 
     return phi_n
 
