@@ -359,3 +359,43 @@ def test_nufft_periods_follow_a_flat_cloud(monkeypatch):
         modes[floor] = sc.info()["pairsum"][0]["modes"]
     assert modes[default][1] < modes[8.0][1]          # the default floor is lower than 1/8
     assert np.prod(modes[default]) < np.prod(modes[8.0])
+
+
+def test_fused_cell_pass_against_the_numpy_path():
+    """The compiled fused pass (Morse, Cucker–Smale, the near part of a split) equals the
+    general path (gather, numpy value_sq, scatter) to 1e-12."""
+    from kinred.pairsum.cells import kernel_values, near_sums
+
+    rng = np.random.default_rng(8)
+    for k in (1, 2, 3):
+        s = rng.uniform(0, 6, (700, k)) + 50.0
+        s[5] = s[6]                                   # a coincident pair (soft = 0: u := 0)
+        Z = rng.normal(size=(700, k + 1))
+        m0 = Morse(0.5, 2.0, 1.0, 0.5, soft=0.0)
+        phi_f = _nearfield.far_profile(m0, 1.3, 1e-8)
+        for fn in (kernel_values(Morse(0.5, 2.0, 1.0, 0.5, soft=0.1)), kernel_values(m0),
+                   kernel_values(CuckerSmale(0.8, 1.5)), kernel_values(CuckerSmale(0.8, 0.7)),
+                   _nearfield.near_kernel((m0,), phi_f)):
+            assert fn.fused is not None
+            out = {}
+            for compiled in (True, False):
+                A = np.zeros((700, k + 1))
+                near_sums(s, 2.0, [(fn, Z, A)], compiled)
+                out[compiled] = A
+            np.testing.assert_allclose(out[True], out[False], rtol=1e-12,
+                                       atol=1e-12 * np.abs(out[False]).max())
+
+
+def test_pair_form_hook():
+    from kinred.pairsum import pair_form
+
+    assert pair_form(Morse(1.0, 2.0, 1.5, 0.5, soft=0.2)) == ("morse", (1.0, 2.0, 1.5, 0.5, 0.2))
+    assert pair_form(CuckerSmale(0.8, 0.7)) == ("cs", (0.8, 0.7))
+    assert pair_form(lambda s: s) is None
+
+    class Bad:
+        def pair_form(self):
+            return ("morse", (1.0, 2.0))
+
+    with pytest.raises(InvalidInput, match="pair_form"):
+        pair_form(Bad())

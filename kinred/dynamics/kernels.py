@@ -304,6 +304,11 @@ class Morse:
         a cone ``|r|`` when ``U′(0) = 0``) at coincident agents."""
         return self.__call__ if self.soft > 0 else None
 
+    def pair_form(self):
+        """The closed form for the cell list's compiled pass (see
+        :func:`kinred.pairsum.pair_form`): ``("morse", (Ca, la, Cr, lr, soft))``."""
+        return ("morse", (self.Ca, self.la, self.Cr, self.lr, self.soft))
+
     def tail_bound(self):
         r"""The exponential tails: for ``s′ ≥ s``, with ``r = √(s² + soft²)``,
 

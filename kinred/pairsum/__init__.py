@@ -26,7 +26,8 @@ A new backend is one file implementing the protocol; kernels may declare a close
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
-from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, tail_bound
+from ._base import (COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, pair_form,
+                    tail_bound)
 from ._select import as_pairsum
 from .auto import Auto, AutoPlan
 from .cells import CellList, CellListPlan
@@ -37,4 +38,4 @@ from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
-           "radial_profile", "COMPILED_KINDS", "CellList", "CellListPlan", "tail_bound", "Auto", "AutoPlan"]
+           "radial_profile", "COMPILED_KINDS", "CellList", "CellListPlan", "tail_bound", "Auto", "AutoPlan", "pair_form"]

@@ -14,14 +14,23 @@ Kernels (``cache=True``, ``nogil=True``: threads over work items run in parallel
 ``scatter_pairs(oi, oj, phi, m, Z, A)``
     ``A[i] += φ Z[j]`` and ``A[j] += φ Z[i]`` for the first ``m`` pairs (each unordered
     pair's kernel value used in both orientations). Twin: :func:`scatter_pairs_numpy`.
+``pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A)``
+    The three steps in one pass without pair buffers, for kernels with a closed form
+    (``kind``: Morse ``p = (Cₐ, ℓₐ, C_r, ℓ_r, soft)``, Cucker–Smale ``p = (G, β)``), optionally
+    the near part of a NUFFT split (``sp = (1, a, mid, σ, φ(a))``, see
+    ``kinred.pairsum._nearfield``). Twin: :func:`gather_pairs` + the kernel's numpy
+    ``value_sq`` + :func:`scatter_pairs` (the cell list's general path).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-__all__ = ["gather_pairs", "gather_pairs_numpy", "scatter_pairs", "scatter_pairs_numpy"]
+__all__ = ["gather_pairs", "gather_pairs_numpy", "scatter_pairs", "scatter_pairs_numpy",
+           "pairs_fused", "KIND_MORSE", "KIND_CS"]
 
 _FM = {"reassoc", "contract"}
 
@@ -99,3 +108,61 @@ def scatter_pairs_numpy(oi, oj, phi, m, Z, A):
     np.add.at(A, i, f * Z[j])
     np.add.at(A, j, f * Z[i])
     return A
+
+
+#: Kernel kinds of :func:`pairs_fused` (``kinred.pairsum._base.pair_form``).
+KIND_MORSE = 1
+KIND_CS = 2
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _phi(kind, p, q):  # pragma: no cover - compiled
+    if kind == KIND_MORSE:
+        r = math.sqrt(q + p[4] * p[4])
+        if r == 0.0:
+            return 0.0
+        return (p[0] / p[1] * math.exp(-r / p[1]) - p[2] / p[3] * math.exp(-r / p[3])) / r
+    return p[0] * math.exp(-p[1] * math.log1p(q))
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _pair(kind, p, sp, q):  # pragma: no cover - compiled
+    f = _phi(kind, p, q)
+    if sp[0] > 0.0:             # the near part of a split: φ − φ_F
+        s = math.sqrt(q)
+        g = 0.5 * math.erfc((sp[2] - s) / sp[3])
+        f = f * (1.0 - g) if s >= sp[1] else f - g * sp[4]
+    return f
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: no cover
+    k = S.shape[1]
+    nh = nbr.shape[1]
+    d1 = Z.shape[1]
+    m = 0
+    for it in range(items.shape[0]):
+        cell, a0, a1 = items[it, 0], items[it, 1], items[it, 2]
+        s0 = start[cell]
+        e0 = s0 + count[cell]
+        for i in range(s0 + a0, s0 + a1):
+            for h in range(-1, nh):
+                if h < 0:
+                    j0, j1 = i + 1, e0
+                else:
+                    b = nbr[cell, h]
+                    if b < 0:
+                        continue
+                    j0, j1 = start[b], start[b] + count[b]
+                for j in range(j0, j1):
+                    q = 0.0
+                    for l in range(k):
+                        t = S[i, l] - S[j, l]
+                        q += t * t
+                    if q < r2:
+                        f = _pair(kind, p, sp, q)
+                        for l in range(d1):
+                            A[i, l] += f * Z[j, l]
+                            A[j, l] += f * Z[i, l]
+                        m += 1
+    return m

@@ -165,6 +165,20 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
     nthreads = max(1, min(nthreads, len(grid.chunks)))
     shares = [grid.chunks[g::nthreads] for g in range(nthreads)]
 
+    fused = compiled and all(getattr(fn, "fused", None) is not None for fn, _, _ in evals)
+
+    def work_fused(g, mine):
+        A = np.zeros((nacc, n, d1))
+        pairs = 0
+        for fn, z, a in evals:
+            kind = {"morse": _cell_kernels.KIND_MORSE, "cs": _cell_kernels.KIND_CS}[fn.fused[0]]
+            p = np.array(fn.fused[1], dtype=np.float64)
+            sp = fn.split if getattr(fn, "split", None) is not None else np.zeros(5)
+            for items in mine:
+                pairs += _cell_kernels.pairs_fused(items, grid.S, grid.start, grid.count,
+                                                   grid.nbr, grid.r2, kind, p, sp, Zs[z], A[a])
+        return A, pairs // max(1, len(evals))
+
     def work(g, mine):
         A = np.zeros((nacc, n, d1))
         oi = np.empty(grid.buffer, dtype=np.int64)
@@ -181,5 +195,5 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
                 scatter(oi, oj, f, m, Zs[z], A[a])
         return A, pairs
 
-    out = _parallel.run_parallel(work, shares)
+    out = _parallel.run_parallel(work_fused if fused else work, shares)
     return [o[0] for o in out], sum(o[1] for o in out)

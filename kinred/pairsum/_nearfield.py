@@ -96,6 +96,10 @@ def near_kernel(kernels: tuple, phi_f):
         g = G(s)
         return np.where(s >= a, out * (1.0 - g), out - g * phi_a)
 
+    # the compiled pass: one kernel with a closed form
+    phi_n.fused = vals[0].fused if len(vals) == 1 else None
+    phi_n.split = np.array([1.0, a, 0.5 * (a + phi_f.eps_i), _sigma(phi_f.eps_i, phi_f.tau),
+                            phi_a])
     return phi_n
 
 

@@ -23,7 +23,7 @@ from .._validate import as_float, check_alloc
 from .. import _parallel
 from ..errors import InvalidInput
 from . import _cells, _fastsum, _kernels
-from ._base import PairTerms, check_plan_args, tail_bound
+from ._base import PairTerms, check_plan_args, pair_form, tail_bound
 
 __all__ = ["CellList", "CellListPlan", "cutoff_radius"]
 
@@ -223,14 +223,19 @@ class CellList:
 
 def kernel_values(kernel):
     """``q ↦ φ(√q)`` as a fresh array (``value_sq``, on ``(1, m)`` blocks as the dense
-    backend calls it, when the kernel has it)."""
+    backend calls it, when the kernel has it); its attribute ``fused`` is the kernel's
+    :func:`~kinred.pairsum.pair_form` (or None) for the compiled pass."""
     value_sq = getattr(kernel, "value_sq", None)
     if value_sq is not None:
         def values(q):
             q2 = q.reshape(1, -1)
             return value_sq(q2, np.empty_like(q2)).reshape(-1)
-        return values
-    return lambda q: np.asarray(kernel(np.sqrt(q)), dtype=np.float64) * np.ones_like(q)
+    else:
+        def values(q):
+            return np.asarray(kernel(np.sqrt(q)), dtype=np.float64) * np.ones_like(q)
+    values.fused = pair_form(kernel)
+    values.split = None
+    return values
 
 
 def near_sums(s: np.ndarray, R: float, terms: list, compiled: bool = True, record=None):
