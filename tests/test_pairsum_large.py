@@ -138,7 +138,8 @@ def test_cell_kernels_against_numpy_twins():
             assert m == m2
             for b, t in zip(bufs, twin):
                 np.testing.assert_allclose(b[:m], t[:m], rtol=1e-12)
-            phi = np.exp(-bufs[2])
+            phi = np.zeros(grid.buffer)
+            phi[:m] = np.exp(-bufs[2][:m])
             _cell_kernels.scatter_pairs(bufs[0], bufs[1], phi, m, Zs, A1)
             _cell_kernels.scatter_pairs_numpy(bufs[0], bufs[1], phi, m, Zs, A2)
             got += m
@@ -399,3 +400,18 @@ def test_pair_form_hook():
 
     with pytest.raises(InvalidInput, match="pair_form"):
         pair_form(Bad())
+
+
+def test_cell_list_cusp_on_a_close_pair_does_not_shrink_the_cutoff():
+    """Regression (found by hypothesis): 15 agents on a line, Morse soft = 0 – one close
+    pair's u ~ 1/s inflated κ and shrank the cutoff; the error was 3.4·tol."""
+    rng = np.random.default_rng(0)
+    n, k = 15, 1
+    x = rng.uniform(0.0, 1.0, (n, k)) * 5.0
+    v = rng.normal(size=(n, k))
+    w = rng.dirichlet(np.ones(n))
+    eff = [AttractionRepulsion(Morse(1.0, 1.0, 1.5, 0.5, soft=0.0)),
+           Alignment(CuckerSmale(1.0, 2.0), on="v")]
+    got = _pair_field(eff, x, v, CellList(tol=1e-3), w)
+    exact = _pair_field(eff, x, v, Dense(), w)
+    assert np.linalg.norm(got - exact) <= 1e-3 * np.linalg.norm(exact)

@@ -28,7 +28,7 @@ from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args
-from .cells import TRUNC_FACTOR, CellList, cutoff_radius
+from .cells import TRUNC_FACTOR, CellList, cell_scales, cutoff_radius
 from .dense import Dense
 from .nufft import NUFFT, ensure_grid
 
@@ -222,7 +222,7 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
         dmax = float(np.sqrt(np.sum(ext * ext)))
         R = 0.0
         for t, bound in zip(src.terms, src.bounds):
-            kinf, kappa = _fastsum.kernel_scales(t.kernel, s, ext, repr(t.kernel))
+            kinf, kappa = cell_scales(t.kernel, s, ext)
             if kinf > 0.0 and dmax > 0.0:
                 R = max(R, cutoff_radius(bound, TRUNC_FACTOR * sub.tol * kappa, dmax))
         if R == 0.0:
