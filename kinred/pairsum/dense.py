@@ -42,7 +42,7 @@ from functools import partial
 
 import numpy as np
 
-from .._validate import as_choice, as_float, as_int, check_alloc, fmt_bytes
+from .._validate import as_choice, as_float, as_int, check_alloc
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _kernels
