@@ -19,6 +19,10 @@ measured in one process run.
   4. the peer: pykeops (the engine behind SiSyPHE) on the same dense 2-D sum at N = 10⁵, when
      it is importable (it is not a kinred dependency).
 
+* ``auto`` – ``pairsum="auto"`` on the cases of issue 24 (the D'Orsogna ring, the 3-D slab,
+  unsoftened Morse, a spread short-range cloud, the dense refusal of N = 10⁷): see
+  ``_bench_large_n_auto.py``.
+
 Run from the repository root::
 
     python benchmarks/bench_large_n.py                 # everything, full sizes
@@ -185,7 +189,14 @@ def section_random_batch(args):
     run(quick=args.quick)
 
 
-SECTIONS = {"nufft": section_nufft, "random_batch": section_random_batch}
+def section_auto(args):
+    """pairsum="auto" on the cases of issue 24 (see ``_bench_large_n_auto.py``)."""
+    from _bench_large_n_auto import section_auto as run
+
+    run(quick=args.quick, repeat=1 if args.quick else args.repeat)
+
+
+SECTIONS = {"nufft": section_nufft, "random_batch": section_random_batch, "auto": section_auto}
 
 
 def main(argv=None) -> int:

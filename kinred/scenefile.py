@@ -395,6 +395,18 @@ def _nufft(**kw):
     return NUFFT(**kw)
 
 
+def _cells(**kw):
+    from .pairsum import CellList
+
+    return CellList(**kw)
+
+
+def _auto(**kw):
+    from .pairsum import Auto
+
+    return Auto(**kw)
+
+
 def _register_builtins():
     number = "number"
     register_effect("alignment", _build_alignment, keys=(
@@ -432,6 +444,16 @@ def _register_builtins():
             low=1),
     ), doc="fast summation by non-equispaced FFTs (finufft) of smooth radial kernels, "
            "distances in k ≤ 3 dimensions, O(N + n^k log n) per step")
+    register_pairsum("cells", _cells, keys=(
+        Key("tol", number, 1e-6, "target relative accuracy (sets the cutoff from the kernels' "
+            "declared tails)", low=0.0, high=1.0, low_open=True, high_open=True),
+    ), doc="cell list: short-range kernels truncated at a distance set from tol, distances "
+           "in k ≤ 3 dimensions, O(N) memory")
+    register_pairsum("auto", _auto, keys=(
+        Key("tol", number, 1e-6, "target relative accuracy of the approximate candidates",
+            low=0.0, high=1.0, low_open=True, high_open=True),
+    ), doc="the deterministic backend (dense, nufft, cells) of least estimated cost for each "
+           "system and cloud, re-chosen when the cloud changes shape; never random_batch")
     _BUILTIN.update(("effect type", n) for n in _EFFECTS)
     _BUILTIN.update(("pair-sum method", n) for n in _PAIRSUMS)
 

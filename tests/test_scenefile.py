@@ -158,16 +158,19 @@ def test_pairsum_table_builds_the_backends():
     assert isinstance(rb, RandomBatch) and rb.p == 3
     assert cfg({"method": "random_batch"}).scene().pairsum.p == 2          # the key's default
     assert cfg({"method": "nufft", "tol": 1e-8}).scene().pairsum.tol == 1e-8
-    assert tuple(PAIRSUMS) == ("dense", "numpy", "random_batch", "nufft")
+    assert tuple(PAIRSUMS) == ("dense", "numpy", "random_batch", "nufft", "cells", "auto")
+    assert cfg({"method": "cells", "tol": 1e-8}).scene().pairsum.tol == 1e-8
+    assert repr(cfg({"method": "auto"}).scene().pairsum) == "Auto(tol=1e-06)"
     # a scene without the table keeps its digest (old result folders resume); with it, it changes
     assert cfg(None).digest() == config_from_dict(SMALL_SCENE).digest()
     assert "pairsum" not in cfg(None).to_json()
     assert cfg({"method": "dense"}).digest() != cfg(None).digest()
     for table, needle in [
         ({"method": "fmm", "tol": 1e-6}, r"dynamics\.pairsum\.method: unknown pair-sum method "
-                                         r"'fmm'; valid: dense, numpy, random_batch, nufft"),
+                                         r"'fmm'; valid: dense, numpy, random_batch, nufft, cells, "
+                                         r"auto"),
         ({"p": 2}, r"dynamics\.pairsum\.method: missing \(one of dense, numpy, random_batch, "
-                   r"nufft\)"),
+                   r"nufft, cells, auto\)"),
         ({"method": "nufft", "tol": 1.0}, r"dynamics\.pairsum\.tol: must be in \(0, 1\), got 1\.0"),
         ({"method": "random_batch", "p": 1}, r"dynamics\.pairsum\.p: must be >= 2, got 1"),
         ({"method": "random_batch", "p": 2.5}, r"dynamics\.pairsum\.p: must be an integer, got 2\.5"),

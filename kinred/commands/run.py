@@ -92,6 +92,9 @@ def _wrap(text: str) -> list[str]:
 def _backend_text(cfg) -> str:
     method, params = cfg.pairsum if cfg.pairsum is not None else ("dense", {})
     opts = ", ".join(f"{k}={v}" for k, v in params.items())
+    if method == "auto":
+        opts = ", ".join(filter(None, [opts, "chosen per system among dense, nufft, cells by "
+                                             "estimated cost"]))
     return f"{method} pair sums{f' ({opts})' if opts else ''}, precision {cfg.precision}"
 
 

@@ -17,6 +17,12 @@ distances). Built-in kernels also provide
   Cucker–Smale, ``Morse`` with ``soft > 0`` and ``Quadratic`` have one; ``Morse`` with
   ``soft = 0`` (``u(s) ~ 1/s``) returns None.
 
+* ``tail_bound()`` – the kernel hook of the truncating backends (the cell list, the cost
+  model of ``pairsum="auto"``): a vectorized non-increasing ``B(s) ≥ |φ(s′)|`` for all
+  ``s′ ≥ s``, or None (unknown, the default of kernels without the method); see
+  :func:`kinred.pairsum.tail_bound`. Morse declares its exponential tails, Cucker–Smale its
+  algebraic one, Quadratic a constant (no decay).
+
 * ``compiled_form()`` – the kernel hook for compiled code: None, or ``(kind, a, b)`` naming
   a closed form of :data:`kinred.pairsum.COMPILED_KINDS` that equals the kernel (Cucker–Smale:
   ``("cs_halfint", G, 2β)`` or ``("cs_pow", G, β)``). The dense backend evaluates such
@@ -133,6 +139,10 @@ class CuckerSmale:
     def radial_profile(self):
         """The kernel itself: ``G (1 + s²)^(−β)`` is a smooth function of ``s²`` (analytic for
         ``|Im s| < 1``), so it qualifies for the NUFFT backend."""
+        return self.__call__
+
+    def tail_bound(self):
+        """``g`` itself: ``G (1 + s²)^(−β)`` is non-increasing (an algebraic tail)."""
         return self.__call__
 
     def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -294,6 +304,36 @@ class Morse:
         a cone ``|r|`` when ``U′(0) = 0``) at coincident agents."""
         return self.__call__ if self.soft > 0 else None
 
+    def pair_form(self):
+        """The closed form for the cell list's compiled pass (see
+        :func:`kinred.pairsum.pair_form`): ``("morse", (Ca, la, Cr, lr, soft))``."""
+        return ("morse", (self.Ca, self.la, self.Cr, self.lr, self.soft))
+
+    def tail_bound(self):
+        r"""The exponential tails: for ``s′ ≥ s``, with ``r = √(s² + soft²)``,
+
+        .. math:: |u(s')| \le \frac{(C_a/\ell_a) e^{-r/\ell_a} + (C_r/\ell_r) e^{-r/\ell_r}}{r}
+
+        (``|U′(r)| ≤`` the sum of its two terms, both decreasing, divided by ``r′ ≥ r``);
+        ``inf`` at ``s = 0`` when ``soft = 0``.
+
+        Examples
+        --------
+        >>> m = Morse(1.0, 2.0, 1.5, 0.5, soft=0.1)
+        >>> s = np.linspace(3.0, 30.0, 1000)
+        >>> bool(np.all(np.abs(m(s)) <= m.tail_bound()(np.array([3.0]))))
+        True
+        """
+        Ca, la, Cr, lr, e2 = self.Ca, self.la, self.Cr, self.lr, self.soft ** 2
+
+        def bound(s):
+            r = np.sqrt(np.asarray(s, dtype=float) ** 2 + e2)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                out = (Ca / la * np.exp(-r / la) + Cr / lr * np.exp(-r / lr)) / r
+            return np.where(r > 0, out, np.inf)
+
+        return bound
+
     def force_sup(self) -> float:
         """``sup_{s>0} |U′(s)| <= max(Ca/la, Cr/lr)`` (a difference of two positive decreasing terms)."""
         return max(self.Ca / self.la, self.Cr / self.lr)
@@ -418,6 +458,11 @@ class Quadratic:
     def radial_profile(self):
         """The constant itself (one Fourier mode in the NUFFT backend)."""
         return self.__call__
+
+    def tail_bound(self):
+        """``|c|``: no decay (nothing may be truncated)."""
+        c = abs(self.c)
+        return lambda s: np.full(np.shape(s), c)
 
     def sup_norm(self) -> float:
         return abs(self.c)

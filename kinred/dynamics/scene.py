@@ -268,6 +268,22 @@ class Scene:
             dx = np.zeros_like(x) if dxe is None else dxe
         return dx, dv
 
+    def info(self) -> dict:
+        """What the scene's pair sums run on: ``{"backend": repr, "pairsum": ...}`` with the
+        ``info()`` of its most recent plan when the backend's plans have one (e.g. the
+        choice of ``pairsum="auto"`` and its cost estimates, NUFFT's grids, the cell list's
+        cutoffs), else None.
+
+        Examples
+        --------
+        >>> from kinred.dynamics import Alignment
+        >>> Scene([Alignment()]).info()
+        {'backend': 'Dense()', 'pairsum': None}
+        """
+        last = next(reversed(self._plans.values()), None) if self._plans else None
+        fn = getattr(last, "info", None)
+        return {"backend": repr(self.pairsum), "pairsum": fn() if callable(fn) else None}
+
     def noise_increment(self, rng, n: int, dim: int, dt: float):
         """``(ΔX, ΔV)`` of all noise effects over a step ``dt`` (None where absent)."""
         dX = dV = None

@@ -14,16 +14,27 @@ state shape, ``evaluate(plan, x, v, rng)`` per right-hand side.
   non-equispaced FFTs (finufft) for distances in ``k ≤ 3`` dimensions, ``O(N + n^k log n)``
   at a requested relative accuracy ``tol``; kernels declare ``radial_profile()``.
 
+* :class:`CellList` (``pairsum="cells"``): short-range kernels (a declared tail bound,
+  :func:`tail_bound`) truncated at a distance set from ``tol``, pairs from a cell list,
+  ``k ≤ 3``, ``O(N)`` memory.
+
+* :class:`Auto` (``pairsum="auto"``): the deterministic backend (Dense, NUFFT, CellList) of
+  least estimated cost for the scene and the cloud, re-chosen when the cloud changes shape,
+  said by ``Scene.info()``; never RandomBatch.
+
 A backend declares whether its pair sums are exact (``exact = True``: Dense, Numpy) or
-approximate (NUFFT, RandomBatch; a backend that does not say is approximate,
+approximate (NUFFT, RandomBatch, CellList, Auto; a backend that does not say is approximate,
 :func:`is_exact`): certificates cover exact backends only.
 
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
-from ._base import COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, is_exact
+from ._base import (COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, is_exact,
+                    pair_form, tail_bound)
 from ._select import as_pairsum
+from .auto import Auto, AutoPlan
+from .cells import CellList, CellListPlan
 from .dense import Dense, DensePlan
 from .nufft import NUFFT, NUFFTPlan, radial_profile
 from .random_batch import RandomBatch, RandomBatchPlan
@@ -31,4 +42,5 @@ from .reference import Numpy, NumpyPlan
 
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
-           "radial_profile", "COMPILED_KINDS", "is_exact"]
+           "radial_profile", "COMPILED_KINDS", "is_exact", "CellList", "CellListPlan",
+           "tail_bound", "Auto", "AutoPlan", "pair_form"]

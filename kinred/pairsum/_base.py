@@ -19,7 +19,11 @@ import numpy as np
 from .._validate import as_int
 from ..errors import InvalidInput
 
-__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form", "is_exact"]
+__all__ = ["PairSum", "PairTerm", "PairTerms", "COMPILED_KINDS", "compiled_form", "is_exact",
+           "tail_bound", "pair_form"]
+
+#: The closed forms of :func:`pair_form` and their number of parameters.
+PAIR_FORMS = {"morse": 5, "cs": 2}
 
 #: The compiled forms a kernel may declare through ``kernel.compiled_form()``, i.e. the
 #: closed forms ``φ(√q)`` of squared distances ``q`` that the dense backend evaluates inside
@@ -77,6 +81,81 @@ def compiled_form(kernel) -> tuple[str, float, float] | None:
             f"kind in {COMPILED_KINDS} and finite a, b (b a non-negative integer for "
             "'cs_halfint')")
     return (form[0], a, b)
+
+
+def tail_bound(kernel):
+    """The kernel's declared decay bound, a vectorized callable ``B(s)``, or None (unknown).
+
+    The kernel hook of the truncating backends (:class:`~kinred.pairsum.CellList`, the cost
+    model of ``pairsum="auto"``): a kernel may define ``tail_bound()`` returning a callable
+    ``B`` with ``|φ(s′)| ≤ B(s)`` for every ``s′ ≥ s`` (``B`` non-increasing; ``inf``
+    allowed), or None. Kernels without the method have an unknown tail: nothing is
+    truncated for them.
+
+    Raises
+    ------
+    InvalidInput
+        If ``tail_bound`` is not a method returning None or a callable.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Morse
+    >>> B = tail_bound(Morse(Ca=1.0, la=1.0, Cr=0.0, lr=1.0))
+    >>> round(float(B(np.array([2.0]))[0]), 6)    # e^(-2)/2
+    0.067668
+    >>> tail_bound(lambda s: s) is None
+    True
+    """
+    fn = getattr(kernel, "tail_bound", None)
+    if fn is None:
+        return None
+    bound = fn() if callable(fn) else fn
+    if bound is not None and not callable(bound):
+        raise InvalidInput(f"{kernel!r}.tail_bound must be a method returning None or a "
+                           f"vectorized callable B(s) >= |phi(s')| for s' >= s, got {bound!r}")
+    return bound
+
+
+def pair_form(kernel) -> tuple | None:
+    """The kernel's closed form for the cell list's fused compiled pass, or None.
+
+    A kernel may define ``pair_form()`` returning None or ``(kind, params)`` with ``kind`` in
+    :data:`PAIR_FORMS` – ``("morse", (Cₐ, ℓₐ, C_r, ℓ_r, soft))`` for
+    ``u(s) = U′(r)/r``, ``r = √(s² + soft²)`` (0 at ``r = 0``), as ``Morse`` does – and finite
+    parameters; a kernel with a Cucker–Smale :func:`compiled_form` gets ``("cs", (G, β))``.
+
+    Raises
+    ------
+    InvalidInput
+        If ``pair_form()`` returns anything else.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import CuckerSmale, Morse
+    >>> pair_form(Morse(1.0, 2.0, 1.5, 0.5)), pair_form(CuckerSmale(0.8, 1.5))
+    (('morse', (1.0, 2.0, 1.5, 0.5, 0.0)), ('cs', (0.8, 1.5)))
+    """
+    fn = getattr(kernel, "pair_form", None)
+    if fn is None:
+        form = compiled_form(kernel)
+        if form is None:
+            return None
+        return ("cs", (form[1], form[2] / 2.0 if form[0] == "cs_halfint" else form[2]))
+    form = fn() if callable(fn) else fn
+    if form is None:
+        return None
+    try:
+        kind, params = form
+        params = tuple(float(p) for p in params)
+        ok = kind in PAIR_FORMS and len(params) == PAIR_FORMS[kind] and all(
+            np.isfinite(params))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InvalidInput(f"{kernel!r}.pair_form() returned {form!r}; valid: None or (kind, "
+                           f"params) with kind in {tuple(PAIR_FORMS)} and that many finite "
+                           f"parameters {PAIR_FORMS}")
+    return (kind, params)
 
 
 @dataclass(frozen=True)

@@ -89,7 +89,11 @@ _PAIR_SEED = 0x5EED
 #: A grid's flat extents are ``HEADROOM ×`` the cloud's (at least ``1/MIN_ASPECT`` of the
 #: largest), and it is kept while the cloud fits and has not shrunk by more than ``SHRINK``.
 HEADROOM = 1.25
-MIN_ASPECT = 8.0
+#: The floor only keeps a cloud that thickens from rebuilding its grid at every step (each
+#: rebuild adds 25 %); accuracy needs none, so per-axis periods follow a flat cloud's
+#: extents down to 1/64 of its longest (it was 1/8: a 30 × 3 × 0.5 slab then needed 1.8×
+#: the modes, measured at tol 1e-4 and 1e-6 with the same error bound).
+MIN_ASPECT = 64.0
 SHRINK = 4.0
 
 #: finufft gets one OpenMP thread per this many points (at most the engine's threads): each
@@ -217,12 +221,14 @@ def _tail_cut(mag: np.ndarray, target: float) -> int | None:
 
 
 def _bandwidth_1d(phi, E: float, t: float, xt: float, C: float, target: float, cap: int,
-                  name: str) -> float | None:
+                  name: str, xi_min: float = 0.0) -> float | None:
     """A first guess of the bandwidth ``ξ`` at width ``t``: where the ℓ1 tail of the Fourier
     coefficients of the axis slice ``ρ ↦ C + w(ρ)(φ(|ρ|) − C)`` falls below ``target``;
     None beyond ``cap`` half-modes."""
     P = 2.0 * (E + t)
     n = 64
+    while xi_min > 0 and n < 3.0 * xi_min * P / math.pi and n // 3 <= 2 * cap + 64:
+        n *= 2         # sample finer than the profile's known finest feature
     while n // 3 <= 2 * cap + 64:
         rho = np.arange(n // 2 + 1) * (P / n)
         f = C + _window(rho, E, t, xt) * (_profile(phi, rho, name) - C)
@@ -371,7 +377,7 @@ def _too_large(name, ext, tol, modes, max_modes, k) -> TooLarge:
         "cloud")
 
 
-def _width_search(phi, E, target, xt, max_modes, name):
+def _width_search(phi, E, target, xt, max_modes, name, xi_min=0.0):
     """The grid of the best transition width ``t = 2ʲ·max E`` (``j`` in
     :data:`WIDTH_POWERS`): the mode count falls as ``t`` shrinks (smaller period) until the
     window's own bandwidth dominates, so from the ``j`` whose 1-D slice estimate is lowest
@@ -385,7 +391,7 @@ def _width_search(phi, E, target, xt, max_modes, name):
         if j not in guess:
             t = big * 2.0 ** j
             C = _centre_value(phi, E, t, name)
-            xi = _bandwidth_1d(phi, big, t, xt, C, target, max_modes, name)
+            xi = _bandwidth_1d(phi, big, t, xt, C, target, max_modes, name, xi_min)
             est = math.inf if xi is None else math.prod(
                 2 * math.floor(xi * (e + t) / math.pi) + 1 for e in E)
             guess[j] = (est, t, C, xi)
@@ -422,7 +428,7 @@ def _width_search(phi, E, target, xt, max_modes, name):
 
 
 def build_grid(phi, ext: np.ndarray, tol: float, kinf: float, kappa: float, max_modes: int,
-               name: str) -> Grid:
+               name: str, xi_min: float = 0.0) -> Grid:
     """A :class:`Grid` for a cloud of extents ``ext`` (its flat extents from
     :func:`flat_extents`), kernel ``φ`` at relative accuracy ``tol``.
 
@@ -442,7 +448,7 @@ def build_grid(phi, ext: np.ndarray, tol: float, kinf: float, kappa: float, max_
         return Grid(E, 0.0, np.ones(k), (0,) * k, np.full((1,) * k, c0), target, 0.0, kinf,
                     kappa, eps)
     xt = float(erfcinv(2.0 * min(0.25, WINDOW_FACTOR * rel)))
-    modes, t, M, coef, err = _width_search(phi, E, target, xt, max_modes, name)
+    modes, t, M, coef, err = _width_search(phi, E, target, xt, max_modes, name, xi_min)
     if M is None:
         raise _too_large(name, ext, tol, modes, max_modes, k)
     return Grid(E, t, 2.0 * (E + t), M, coef, target, err, kinf, kappa, eps)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from ..errors import InvalidInput
 from ._base import PairSum
+from .auto import Auto
+from .cells import CellList
 from .dense import Dense
 from .nufft import NUFFT
 from .random_batch import RandomBatch
@@ -12,10 +14,11 @@ from .reference import Numpy
 __all__ = ["as_pairsum"]
 
 #: Names accepted for ``pairsum=`` (and the older ``engine=``).
-ALIASES = ("fast", "dense", "numpy", "random_batch", "nufft")
+ALIASES = ("fast", "dense", "numpy", "random_batch", "nufft", "cells", "auto")
 
 #: Names of backends other than the dense one, and what they build (default options).
-_OTHERS = {"numpy": Numpy, "random_batch": RandomBatch, "nufft": NUFFT}
+_OTHERS = {"numpy": Numpy, "random_batch": RandomBatch, "nufft": NUFFT, "cells": CellList,
+           "auto": Auto}
 
 
 def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = None,
@@ -24,13 +27,16 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
 
     Parameters
     ----------
-    pairsum : PairSum or {"fast", "dense", "numpy", "random_batch", "nufft"}, optional
+    pairsum : PairSum or {"fast", "dense", "numpy", "random_batch", "nufft", "cells", "auto"}, optional
         A backend object (anything with ``plan`` and ``evaluate``, see
         :class:`~kinred.pairsum.PairSum`), or a name: ``"fast"``/``"dense"`` for
         :class:`~kinred.pairsum.Dense` (the default), ``"numpy"`` for the twin
         :class:`~kinred.pairsum.Numpy`, ``"random_batch"`` for
         :class:`~kinred.pairsum.RandomBatch` with ``p = 2``, ``"nufft"`` for
-        :class:`~kinred.pairsum.NUFFT` with ``tol = 1e-6`` (other options: pass the object).
+        :class:`~kinred.pairsum.NUFFT` with ``tol = 1e-6``, ``"cells"`` for
+        :class:`~kinred.pairsum.CellList` with ``tol = 1e-6``, ``"auto"`` for
+        :class:`~kinred.pairsum.Auto` (the deterministic backend of least estimated cost,
+        ``tol = 1e-6``; other options: pass the object).
     engine : {"fast", "dense", "numpy", "random_batch", "nufft"}, optional
         The older name of ``pairsum`` (strings only); give one of the two.
     block, precision : optional

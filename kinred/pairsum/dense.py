@@ -42,9 +42,9 @@ from functools import partial
 
 import numpy as np
 
-from .._validate import as_choice, as_int
+from .._validate import as_choice, as_float, as_int, check_alloc
 from .. import _parallel
-from ..errors import InvalidInput
+from ..errors import InvalidInput, TooLarge
 from . import _kernels
 from ._base import PairTerms, check_plan_args
 
@@ -66,6 +66,14 @@ BIG_K = 48
 _SCRATCH = threading.local()
 _SCRATCH_KEEP = 2                  # signatures kept per thread (e.g. an original and a projection)
 _SCRATCH_MAX_BYTES = 256 * 2**20   # larger workspaces are not kept between calls
+
+#: Optimistic pair throughputs of the whole engine (pairs per second, all threads; measured
+#: about 5e8 with compiled kernels and 8e7 with numpy kernels in 2-D on 2 cores): the time
+#: estimate of :meth:`Dense.plan` divides by them, so it is a lower bound of the real time.
+PAIRS_PER_SECOND_COMPILED = 2e9
+PAIRS_PER_SECOND_NUMPY = 5e8
+#: Default ``max_seconds``: a right-hand side estimated (optimistically) beyond it is refused.
+MAX_SECONDS = 3600.0
 
 _KIND_CODE = {"cs_halfint": _kernels.KIND_CS_HALFINT, "cs_pow": _kernels.KIND_CS_POW}
 
@@ -205,6 +213,13 @@ class Dense:
     compiled : bool
         Run a thread's strips as one compiled call when every kernel has a compiled form
         (default True); False forces the Python strip loop (same operations), for comparison.
+    max_seconds : float
+        :meth:`plan` refuses (:class:`~kinred.errors.TooLarge`, before any work) a size whose
+        estimated time per right-hand side exceeds it (default one hour). The estimate
+        (:func:`estimate_seconds`) is optimistic – a lower bound of the real time – so
+        that only sizes surely out of reach are refused (e.g. ``N = 10⁷`` in 2-D: about 7
+        hours at best); the message names the backend that fits. The workspace is checked
+        against the memory limit (:func:`kinred._validate.check_alloc`) as well.
 
     Examples
     --------
@@ -219,8 +234,10 @@ class Dense:
     #: certificates account for): certificates cover this backend.
     exact = True
 
-    def __init__(self, block: int | None = None, precision: str = "double", compiled: bool = True):
+    def __init__(self, block: int | None = None, precision: str = "double", compiled: bool = True,
+                 max_seconds: float = MAX_SECONDS):
         self.block = None if block is None else as_int(block, "block", low=1)
+        self.max_seconds = as_float(max_seconds, "max_seconds", low=0.0, low_open=True)
         self.precision = as_choice(precision, "precision", ("double", "mixed"))
         if not isinstance(compiled, (bool, np.bool_)):
             raise InvalidInput(f"compiled must be True or False, got {compiled!r}")
@@ -234,6 +251,8 @@ class Dense:
             opts.append(f"precision={self.precision!r}")
         if not self.compiled:
             opts.append("compiled=False")
+        if self.max_seconds != MAX_SECONDS:
+            opts.append(f"max_seconds={self.max_seconds!r}")
         return f"Dense({', '.join(opts)})"
 
     # ------------------------------------------------------------------ plan
@@ -242,6 +261,12 @@ class Dense:
         threads (see :class:`~kinred.pairsum.PairSum`)."""
         terms, n, dim = check_plan_args(scene, n, dim)
         forms = [t.compiled for t in terms.terms]
+        secs = estimate_seconds(n, dim, terms)
+        if secs > self.max_seconds:
+            raise TooLarge(f"Dense: one right-hand side of {n} agents in dimension {dim} "
+                           f"({len(terms.sources)} distance source(s), {n * (n - 1) // 2:.3g} "
+                           f"pairs) takes an estimated {_fmt_seconds(secs)} at best, more than "
+                           f"max_seconds={self.max_seconds:g}; {_fits(dim)}")
         ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
         nthreads = _parallel.get_num_threads()
         st = strips(n, self.block, dim, nthreads, ft.itemsize)
@@ -255,6 +280,8 @@ class Dense:
             n * dim * len(gram) + n * (dim + 1) * len(terms.carriers)
             + nthreads * (n * (dim + 1) * len(terms.accumulators) + maxel * (1 + need_phi)))
             + 24 * n * nthreads)
+        check_alloc(nbytes, f"Dense: the workspace of the pair sums of {n} agents in dimension "
+                    f"{dim}", _fits(dim))
         groups = _balance(st, n, nthreads)
         use_worker = (self.compiled and _kernels.HAVE_COMPILED_FOR.get(ft, False)
                       and all(f is not None for f in forms))
@@ -293,6 +320,41 @@ class Dense:
             for s in plan.terms.sources:
                 _kernels.COUNTERS[s] += len(plan.strips)
         return _finish(plan, accs, ws["centred"])
+
+
+def estimate_seconds(n: int, dim: int, terms: PairTerms) -> float:
+    """An optimistic estimate (a lower bound) of the seconds of one dense right-hand side:
+    ``n(n − 1)/2`` pairs per distance source at :data:`PAIRS_PER_SECOND_COMPILED` (every kernel
+    compiled) or :data:`PAIRS_PER_SECOND_NUMPY`, times ``max(1, (dim + 1)/4)`` (the products'
+    width).
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Alignment, Scene
+    >>> round(estimate_seconds(10**7, 2, Scene([Alignment()]).pair_terms))
+    25000
+    """
+    rate = (PAIRS_PER_SECOND_COMPILED if all(t.compiled is not None for t in terms.terms)
+            else PAIRS_PER_SECOND_NUMPY)
+    return len(terms.sources) * (n * (n - 1) / 2.0) * max(1.0, (dim + 1) / 4.0) / rate
+
+
+def _fmt_seconds(secs: float) -> str:
+    if secs < 120:
+        return f"{secs:.3g} s"
+    if secs < 7200:
+        return f"{secs / 60:.3g} min"
+    return f"{secs / 3600:.3g} h"
+
+
+def _fits(dim: int) -> str:
+    """The backends that fit a size Dense refuses."""
+    if dim <= 3:
+        return ("use a fast summation: pairsum='auto' (chooses among the deterministic backends "
+                "by their cost), 'nufft' (smooth kernels) or 'cells' (short-range kernels)")
+    return ("distances in dimension > 3 have no fast exact summation: project the scene to "
+            "k <= 3 (Scene.project) for pairsum='auto'/'nufft'/'cells', or use "
+            "pairsum='random_batch' (an unbiased approximation, explicit only)")
 
 
 def _worker(terms: PairTerms, forms: list, ft: np.dtype, dim: int, groups: tuple) -> _Worker:

@@ -25,9 +25,10 @@ import numpy as np
 
 from .._validate import as_float, as_int
 from .. import _parallel
-from ..errors import InvalidInput
-from . import _fastsum
+from ..errors import InvalidInput, TooLarge
+from . import _fastsum, _nearfield
 from ._base import PairTerms, check_plan_args
+from .cells import near_sums
 
 __all__ = ["NUFFT", "NUFFTPlan", "radial_profile"]
 
@@ -97,7 +98,11 @@ class _Group:
     target: str
     phi: object
     name: str
+    kernels: tuple = ()      # the raw kernels (the near part of a split evaluates them)
+    smooth: bool = True      # every kernel has a smooth radial profile
     grid: _fastsum.Grid | None = None
+    split: object = None     # a _nearfield.Split when the group is split
+    near_pairs: int = 0      # pairs summed exactly (last call)
     fast: _fastsum.FastSum | None = None
     builds: int = 0          # grids built (coefficient FFTs)
     plans: int = 0           # finufft plans made
@@ -116,6 +121,7 @@ class NUFFTPlan:
         The coefficients ``c_j``.
     tol : float
     max_modes, nthreads : int
+    near_field : bool or None
     groups : tuple of _Group
         One per ``(source, carrier, target)`` of the scene's terms.
     """
@@ -128,6 +134,7 @@ class NUFFTPlan:
     max_modes: int
     nthreads: int
     groups: tuple
+    near_field: bool | None = None
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def info(self) -> list:
@@ -142,7 +149,9 @@ class NUFFTPlan:
                         "periods": None if gr is None else gr.periods.tolist(),
                         "width": None if gr is None else gr.width,
                         "eps": None if gr is None else gr.eps,
-                        "kernel_error": None if gr is None else gr.error})
+                        "kernel_error": None if gr is None else gr.error,
+                        "near_radius": None if g.split is None else g.split.radius,
+                        "near_pairs": g.near_pairs})
         return out
 
 
@@ -165,6 +174,14 @@ class NUFFT:
         to ``tol/100``; two agents (one pair) up to ``0.5·tol``; at ``tol = 1e-10`` the
         transforms' float64 round-off (about 1e-11) takes up to ``0.75·tol`` (table in
         docs/dynamics.md, section "Pair sums for large N").
+    near_field : bool or None
+        The near-field split (``kinred.pairsum._nearfield``): the kernel regularized inside a
+        near radius ``ε_I`` on a coarse grid, the rest summed exactly over the pairs closer
+        than ``ε_I`` (a cell list). False (default): never (today's single grid; kernels
+        need a smooth radial profile); True: always; None: when needed – a kernel without a
+        smooth profile (its cusp goes to the near part, e.g. Morse with ``soft = 0``) or a
+        single grid beyond ``max_modes`` (``pairsum="auto"`` uses None). ``ε_I`` is chosen
+        by a cost model of near pairs against modes; the error control is the grid's.
     max_modes : int
         Limit on the Fourier modes of one grid (default ``2**20``: ``1024²`` in 2-D, ``101³``
         in 3-D, a few hundred MB of transform arrays). A cloud that needs more (e.g. a 3-D
@@ -199,12 +216,19 @@ class NUFFT:
     #: The pair sums are approximate (relative accuracy ``tol``): certificates refuse it.
     exact = False
 
-    def __init__(self, tol: float = 1e-6, max_modes: int = _fastsum.MAX_MODES):
+    def __init__(self, tol: float = 1e-6, max_modes: int = _fastsum.MAX_MODES,
+                 near_field: bool | None = False):
         self.tol = as_float(tol, "tol", low=0.0, high=1.0, low_open=True, high_open=True)
         self.max_modes = as_int(max_modes, "max_modes", low=1)
+        if near_field not in (None, True, False):
+            raise InvalidInput(f"near_field must be None (when needed), True or False, got "
+                               f"{near_field!r}")
+        self.near_field = near_field
 
     def __repr__(self) -> str:
         extra = "" if self.max_modes == _fastsum.MAX_MODES else f", max_modes={self.max_modes!r}"
+        if self.near_field is not False:
+            extra += f", near_field={self.near_field!r}"
         return f"NUFFT(tol={self.tol!r}{extra})"
 
     # ------------------------------------------------------------------ plan
@@ -222,19 +246,27 @@ class NUFFT:
                 f"the NUFFT backend sums kernels of distances in k <= {MAX_DIM} dimensions "
                 f"(finufft's 1-, 2- and 3-D transforms); the state has dim = {dim}: project "
                 "the scene first (Scene.project to k <= 3) or use the Dense backend")
-        keys, profiles, names = [], {}, {}
+        keys, profiles, names, kernels, smooth = [], {}, {}, {}, {}
         for t in terms.terms:
             key = (t.source, t.carrier, t.target)
             if key not in profiles:
                 keys.append(key)
-                profiles[key], names[key] = [], []
-            profiles[key].append(radial_profile(t.kernel, t.effect))
+                profiles[key], names[key], kernels[key], smooth[key] = [], [], [], True
+            try:
+                profiles[key].append(radial_profile(t.kernel, t.effect))
+            except InvalidInput:
+                if self.near_field is False:
+                    raise
+                profiles[key].append(t.kernel)     # its cusp goes to the near part
+                smooth[key] = False
             names[key].append(repr(t.kernel))
+            kernels[key].append(t.kernel)
         groups = tuple(_Group(*key, phi=_summed(tuple(profiles[key])),
-                              name=" + ".join(names[key])) for key in keys)
+                              name=" + ".join(names[key]), kernels=tuple(kernels[key]),
+                              smooth=smooth[key]) for key in keys)
         return NUFFTPlan(n=n, dim=dim, terms=terms, c=scene.coefficients(n), tol=self.tol,
                          max_modes=self.max_modes, nthreads=_parallel.get_num_threads(),
-                         groups=groups)
+                         groups=groups, near_field=self.near_field)
 
     # ------------------------------------------------------------------ evaluate
     def evaluate(self, plan: NUFFTPlan, x: np.ndarray, v: np.ndarray | None, rng=None) -> dict:
@@ -282,21 +314,54 @@ def _strengths(z: np.ndarray, c: np.ndarray) -> tuple:
     return zt, packed
 
 
+def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
+    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built):
+    a :class:`_fastsum.Grid`, None when the kernel vanishes on every difference, or
+    ``"nan"`` for a non-finite cloud.
+
+    Raises
+    ------
+    TooLarge
+        The cloud needs more than ``plan.max_modes`` modes at ``plan.tol``.
+    """
+    lo = s.min(axis=0) if lo is None else lo
+    hi = s.max(axis=0) if hi is None else hi
+    ext = hi - lo
+    if not np.all(np.isfinite(ext)):
+        return "nan"
+    grid = g.grid
+    if grid is None or not grid.fits(ext):
+        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+        if kinf == 0.0:                      # the kernel vanishes on every difference
+            return None
+        split = plan.near_field is True or not g.smooth
+        if not split:
+            try:
+                grid = _fastsum.build_grid(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes,
+                                           g.name)
+                g.split = None
+            except TooLarge:
+                if plan.near_field is False:
+                    raise
+                split = True
+        if split:
+            g.split = _nearfield.split(g.phi, g.kernels, s, ext, plan.tol, kappa,
+                                       plan.max_modes, g.name, plan.dim)
+            grid = g.split.grid
+        g.grid, g.builds = grid, g.builds + 1
+    return grid
+
+
+
 def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
                strengths: np.ndarray) -> np.ndarray:
     """``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` of one group, ``(n, d)``, fresh."""
     n, d = zt.shape
     lo, hi = s.min(axis=0), s.max(axis=0)
-    ext = hi - lo
-    if not np.all(np.isfinite(ext)):        # a diverging state: let the integrator's guard see it
-        return np.full((n, d), np.nan)
-    grid = g.grid
-    if grid is None or not grid.fits(ext):
-        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
-        if kinf == 0.0:                      # the kernel vanishes on every difference
-            return np.zeros((n, d))
-        grid = _fastsum.build_grid(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes, g.name)
-        g.grid, g.builds = grid, g.builds + 1
+    grid = ensure_grid(plan, g, s, lo, hi)
+    if grid is None or isinstance(grid, str):
+        # a diverging state (let the integrator's guard see it), or a vanishing kernel
+        return np.full((n, d), np.nan) if grid == "nan" else np.zeros((n, d))
     if g.fast is None or not g.fast.matches(grid, n):
         g.fast = None                        # release the old plan's memory first
         g.fast = _fastsum.FastSum(grid, n, strengths.shape[0], plan.nthreads)
@@ -305,4 +370,12 @@ def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     sums = np.empty((d + 1, n))
     sums[0::2] = F.real[: (d + 2) // 2]
     sums[1::2] = F.imag[: (d + 1) // 2]
+    if g.split is not None:                  # the near part, pair by pair
+        zext = np.empty((n, d + 1))
+        np.multiply(zt, plan.c[:, None], out=zext[:, :d])
+        zext[:, d] = plan.c
+        A = np.zeros((n, d + 1))
+        g.near_pairs = near_sums(np.ascontiguousarray(s, dtype=np.float64), g.split.radius,
+                                 [(g.split.near, zext, A)])
+        sums += A.T
     return sums[:d].T - sums[d][:, None] * zt

@@ -1,0 +1,168 @@
+"""Private numba kernels of the cell list (:mod:`kinred.pairsum._cells`), each with a numpy twin.
+
+Points are sorted by cell, so that the agents of a cell are contiguous; a work item is a row
+range ``[a0, a1)`` of one cell (positions in the sorted order) and its half stencil of
+neighbour cells (those after it in lexicographic offset order), so that every unordered pair
+within the cutoff is met exactly once.
+
+Kernels (``cache=True``, ``nogil=True``: threads over work items run in parallel)
+-------
+``gather_pairs(items, S, start, count, nbr, r2, oi, oj, oq)``
+    The pairs ``(i, j)`` (sorted positions, ``i < j`` within a cell) of the items with
+    ``|sᵢ − sⱼ|² < r2`` and their squared distances, written to ``oi, oj, oq``; returns
+    their number. Twin: :func:`gather_pairs_numpy`.
+``scatter_pairs(oi, oj, phi, m, Z, A)``
+    ``A[i] += φ Z[j]`` and ``A[j] += φ Z[i]`` for the first ``m`` pairs (each unordered
+    pair's kernel value used in both orientations). Twin: :func:`scatter_pairs_numpy`.
+``pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A)``
+    The three steps in one pass without pair buffers, for kernels with a closed form
+    (``kind``: Morse ``p = (Cₐ, ℓₐ, C_r, ℓ_r, soft)``, Cucker–Smale ``p = (G, β)``), optionally
+    the near part of a NUFFT split (``sp = (1, a, mid, σ, φ(a))``, see
+    ``kinred.pairsum._nearfield``). Twin: :func:`gather_pairs` + the kernel's numpy
+    ``value_sq`` + :func:`scatter_pairs` (the cell list's general path).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["gather_pairs", "gather_pairs_numpy", "scatter_pairs", "scatter_pairs_numpy",
+           "pairs_fused", "KIND_MORSE", "KIND_CS"]
+
+_FM = {"reassoc", "contract"}
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def gather_pairs(items, S, start, count, nbr, r2, oi, oj, oq):  # pragma: no cover - compiled
+    k = S.shape[1]
+    nh = nbr.shape[1]
+    m = 0
+    for it in range(items.shape[0]):
+        cell, a0, a1 = items[it, 0], items[it, 1], items[it, 2]
+        s0 = start[cell]
+        e0 = s0 + count[cell]
+        for i in range(s0 + a0, s0 + a1):
+            for j in range(i + 1, e0):
+                q = 0.0
+                for l in range(k):
+                    t = S[i, l] - S[j, l]
+                    q += t * t
+                if q < r2:
+                    oi[m] = i
+                    oj[m] = j
+                    oq[m] = q
+                    m += 1
+            for h in range(nh):
+                b = nbr[cell, h]
+                if b < 0:
+                    continue
+                for j in range(start[b], start[b] + count[b]):
+                    q = 0.0
+                    for l in range(k):
+                        t = S[i, l] - S[j, l]
+                        q += t * t
+                    if q < r2:
+                        oi[m] = i
+                        oj[m] = j
+                        oq[m] = q
+                        m += 1
+    return m
+
+
+def gather_pairs_numpy(items, S, start, count, nbr, r2, oi, oj, oq) -> int:
+    """Twin of :func:`gather_pairs` (numpy, item by item; same pairs in the same order)."""
+    m = 0
+    for cell, a0, a1 in np.asarray(items):
+        s0, e0 = start[cell], start[cell] + count[cell]
+        blocks = [nbr[cell, h] for h in range(nbr.shape[1]) if nbr[cell, h] >= 0]
+        for i in range(s0 + a0, s0 + a1):
+            js = np.concatenate([np.arange(i + 1, e0)]
+                                + [np.arange(start[b], start[b] + count[b]) for b in blocks])
+            q = np.sum((S[i] - S[js]) ** 2, axis=1)
+            keep = q < r2
+            c = int(keep.sum())
+            oi[m:m + c] = i
+            oj[m:m + c] = js[keep]
+            oq[m:m + c] = q[keep]
+            m += c
+    return m
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def scatter_pairs(oi, oj, phi, m, Z, A):  # pragma: no cover - compiled
+    d1 = Z.shape[1]
+    for p in range(m):
+        i, j, f = oi[p], oj[p], phi[p]
+        for l in range(d1):
+            A[i, l] += f * Z[j, l]
+            A[j, l] += f * Z[i, l]
+    return A
+
+
+def scatter_pairs_numpy(oi, oj, phi, m, Z, A):
+    """Twin of :func:`scatter_pairs` (``np.add.at``)."""
+    i, j, f = oi[:m], oj[:m], phi[:m, None]
+    np.add.at(A, i, f * Z[j])
+    np.add.at(A, j, f * Z[i])
+    return A
+
+
+#: Kernel kinds of :func:`pairs_fused` (``kinred.pairsum._base.pair_form``).
+KIND_MORSE = 1
+KIND_CS = 2
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _phi(kind, p, q):  # pragma: no cover - compiled
+    if kind == KIND_MORSE:
+        r = math.sqrt(q + p[4] * p[4])
+        if r == 0.0:
+            return 0.0
+        return (p[0] / p[1] * math.exp(-r / p[1]) - p[2] / p[3] * math.exp(-r / p[3])) / r
+    return p[0] * math.exp(-p[1] * math.log1p(q))
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def _pair(kind, p, sp, q):  # pragma: no cover - compiled
+    f = _phi(kind, p, q)
+    if sp[0] > 0.0:             # the near part of a split: φ − φ_F
+        s = math.sqrt(q)
+        g = 0.5 * math.erfc((sp[2] - s) / sp[3])
+        f = f * (1.0 - g) if s >= sp[1] else f - g * sp[4]
+    return f
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: no cover
+    k = S.shape[1]
+    nh = nbr.shape[1]
+    d1 = Z.shape[1]
+    m = 0
+    for it in range(items.shape[0]):
+        cell, a0, a1 = items[it, 0], items[it, 1], items[it, 2]
+        s0 = start[cell]
+        e0 = s0 + count[cell]
+        for i in range(s0 + a0, s0 + a1):
+            for h in range(-1, nh):
+                if h < 0:
+                    j0, j1 = i + 1, e0
+                else:
+                    b = nbr[cell, h]
+                    if b < 0:
+                        continue
+                    j0, j1 = start[b], start[b] + count[b]
+                for j in range(j0, j1):
+                    q = 0.0
+                    for l in range(k):
+                        t = S[i, l] - S[j, l]
+                        q += t * t
+                    if q < r2:
+                        f = _pair(kind, p, sp, q)
+                        for l in range(d1):
+                            A[i, l] += f * Z[j, l]
+                            A[j, l] += f * Z[i, l]
+                        m += 1
+    return m
