@@ -38,7 +38,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..._repr import result_repr
 from ..._validate import as_choice, as_int
 from ...errors import InvalidInput
 from ...io import to_jsonable
@@ -143,8 +142,6 @@ class CostConfig:
 @dataclass(frozen=True)
 class CostResult:
     """Numbers of the cost study (``studies``: one JSON-ready dict per study), headline, machine."""
-
-    __repr__ = result_repr  # shapes and headline numbers, never whole arrays
 
     config: CostConfig
     studies: dict
