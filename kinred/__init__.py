@@ -7,10 +7,7 @@ of the paper (Fornasier, Haškovec, Vybíral) maps onto the packages::
        |                     |                                 +--> W1 / errors / bounds
        +--push(M)--> M#mu    +--project(M)--> simulate in R^k --+--> recover (l1)
 
-Naming rule: ``kinred.X`` for a subpackage ``X`` is always that module (``import kinred.X``
-and ``kinred.X`` agree); a function is re-exported here only when its name is no subpackage's,
-so a subpackage's namesake function is reached through it: ``kinred.quantize.quantize``,
-``kinred.certify.certify``. See ``docs/`` and ``docs/architecture.md``.
+See ``docs/`` and ``docs/architecture.md``.
 """
 
 from ._version import __version__
@@ -68,7 +65,11 @@ from .observables import (above_floor, centre, flocking_verdict, gamma, gamma_fl
                           mean_velocity, relative_error)
 from .ensemble import EnsembleResult, grid, run_ensemble
 from .io import ResultFolder
-from . import certify, kinetic, quantize  # subpackages: the modules, never a function
+# Naming rule (docs/architecture.md): kinred.X for a subpackage or module X is always that
+# module; a function is re-exported here only under a name that is no module's, so a
+# subpackage's namesake function is reached through it (kinred.quantize.quantize,
+# kinred.certify.certify).
+from . import certify, kinetic, quantize
 
 __all__ = [
     "__version__",
@@ -93,7 +94,7 @@ __all__ = [
     "gamma_floor", "above_floor",
     # ensembles and results
     "run_ensemble", "grid", "EnsembleResult", "ResultFolder",
-    # subpackages whose name is also their main function (the module wins, see the docstring):
+    # subpackages, modules whatever their functions are called (the rule above `from . import`):
     # kinred.quantize.quantize, kinred.certify.certify / Certificate,
     # kinred.kinetic.solve / reduce / compare / theorem_bound
     "quantize",
