@@ -118,7 +118,10 @@ def test_the_final_state_is_priced_before_the_run(monkeypatch):
     from kinred.integrate import simulate
     from kinred.integrate._save import GRID_POINT_BYTES, OBS_VALUE_BYTES
 
-    sc, x = Scene([Alignment(CuckerSmale())]), np.random.default_rng(0).uniform(size=(40, 3))
+    from kinred.dynamics import SelfPropulsion
+
+    # no pair sums (their workspace is priced against the same limit)
+    sc, x = Scene([SelfPropulsion(1.0, 0.5)]), np.random.default_rng(0).uniform(size=(40, 3))
     save = SaveAt(every=2, observables=("gamma",))              # 10 steps: 5 + 2 points
     need = 7 * (GRID_POINT_BYTES + OBS_VALUE_BYTES + 16 * 3) + 2 * 8 * 40 * 3
     monkeypatch.setenv("KINRED_MAX_BYTES", str(need))
