@@ -185,7 +185,7 @@ def test_compare_above_the_threshold_never_calls_pot_and_brackets_the_exact_w1(m
     assert c.lower[-1] > 0.2 * c.upper[-1]         # informative, not just [0, coupling]
     with pytest.raises(AssertionError, match="POT called"):
         compare(sol, red, max_pot_atoms=60)        # at the threshold POT is still used
-    assert MAX_POT_ATOMS == 100_000
+    assert MAX_POT_ATOMS == 10_000_000         # beyond the dense LP compare uses the sparse method
 
 
 def test_compare_bad_arguments():

@@ -272,3 +272,12 @@ def test_a_search_cut_short_gives_a_lower_bound_of_the_minimum():
     assert np.all(f <= f_ref + 1e-12)                         # a bound, never above the minimum
     np.testing.assert_allclose(f[opened == 0], f_ref[opened == 0], rtol=1e-12, atol=1e-15)
     assert _search.LEAVES_PAST_DEADLINE == 8
+
+
+def test_auto_when_the_sparse_preflight_refuses():
+    x = np.random.default_rng(12).random((300, 3))
+    r = w1(x, x + 0.1, max_dense_bytes=0, max_bytes=10_000)          # lazy LP still allowed
+    assert r.exact and r.method == "exact-lazy"
+    assert r.value == pytest.approx(0.1 * np.sqrt(3), rel=1e-12)
+    with pytest.raises(TooLarge, match="method='sparse'.*atoms per side fit"):
+        w1(x, x + 0.1, max_dense_bytes=0, max_bytes=10_000, max_exact_pairs=10)

@@ -380,7 +380,12 @@ def _run_auto_sparse(p: _Problem) -> W1Result:
     """"auto" beyond :data:`AUTO_DENSE_PAIRS`: the sparse method; if it does not close, the
     dense LP where it fits ``max_dense_bytes``, the lazy LP while ``N·M ≤ max_exact_pairs``,
     else TooLarge carrying the certified bracket (``.result``)."""
-    res = _run_sparse(p)
+    try:
+        res = _run_sparse(p)
+    except TooLarge:                               # its memory preflight: the lazy LP if allowed
+        if p.n_atoms[0] * p.n_atoms[1] > p.max_exact_pairs:
+            raise
+        return _run_exact_lazy(p)
     if res.exact:
         return res
     n, m = res.n_atoms

@@ -41,7 +41,7 @@ MAX_POT_ATOMS = 10_000_000
 
 #: Time budget (seconds) of the sparse W1 method per saved time in :func:`compare`: past it,
 #: its certified bracket is reported (``exact`` False at that time).
-MAX_W1_SECONDS = 120.0
+MAX_W1_SECONDS = 60.0
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,7 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
         Above this many atoms no linear program is solved: each time gets the certified
         bracket of :func:`kinred.distance.paired_w1_bracket` (``method="paired-bracket"``).
     max_seconds : float
-        Time budget of the sparse W1 method per saved time (``MAX_W1_SECONDS``, 120 s).
+        Time budget of the sparse W1 method per saved time (``MAX_W1_SECONDS``, 60 s).
     seed : int
         Seed of the bracket's random directions (time ``i`` uses ``member_seed(seed, i)``).
 
