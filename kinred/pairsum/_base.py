@@ -120,7 +120,7 @@ def pair_form(kernel) -> tuple | None:
     """The kernel's closed form for the cell list's fused compiled pass, or None.
 
     A kernel may define ``pair_form()`` returning None or ``(kind, params)`` with ``kind`` in
-    :data:`PAIR_FORMS` – ``("morse", (Cₐ, ℓₐ, C_r, ℓ_r, soft))`` for
+    ``PAIR_FORMS`` – ``("morse", (Cₐ, ℓₐ, C_r, ℓ_r, soft))`` for
     ``u(s) = U′(r)/r``, ``r = √(s² + soft²)`` (0 at ``r = 0``), as ``Morse`` does – and finite
     parameters; a kernel with a Cucker–Smale :func:`compiled_form` gets ``("cs", (G, β))``.
 

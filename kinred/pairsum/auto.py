@@ -4,7 +4,7 @@ r"""``pairsum="auto"``: the deterministic backend of least estimated cost for th
 exact :class:`~kinred.pairsum.Dense`, :class:`~kinred.pairsum.NUFFT` (smooth kernels,
 ``k ≤ 3``) and :class:`~kinred.pairsum.CellList` (kernels with a declared decay, ``k ≤ 3``),
 the latter two at the requested ``tol`` – by a cost model of one right-hand side
-(:func:`costs`) from ``N``, ``k``, the cloud's extents and pair distances and the kernels;
+(``costs``) from ``N``, ``k``, the cloud's extents and pair distances and the kernels;
 it never picks :class:`~kinred.pairsum.RandomBatch` (an approximation of another kind, which
 stays explicit). The choice is re-made when the cloud's extents leave ``[1/1.25, 1.25]``
 times those it was made for, and it is said: :meth:`AutoPlan.info`, ``Scene.info()``.
@@ -121,7 +121,7 @@ class Auto:
 
     def choose(self, plan: AutoPlan, x: np.ndarray, v: np.ndarray | None = None) -> str:
         """The backend for the state ``(x, v)``: the last choice while the cloud keeps its
-        shape, else the candidate of least estimated cost (:func:`costs`; Dense on ties).
+        shape, else the candidate of least estimated cost (``costs``; Dense on ties).
 
         Raises
         ------

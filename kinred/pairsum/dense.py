@@ -216,10 +216,10 @@ class Dense:
     max_seconds : float
         :meth:`plan` refuses (:class:`~kinred.errors.TooLarge`, before any work) a size whose
         estimated time per right-hand side exceeds it (default one hour). The estimate
-        (:func:`estimate_seconds`) is optimistic – a lower bound of the real time – so
+        (``kinred.pairsum.dense.estimate_seconds``) is optimistic – a lower bound of the real time – so
         that only sizes surely out of reach are refused (e.g. ``N = 10⁷`` in 2-D: about 7
         hours at best); the message names the backend that fits. The workspace is checked
-        against the memory limit (:func:`kinred._validate.check_alloc`) as well.
+        against the memory limit (``kinred._validate.check_alloc``) as well.
 
     Examples
     --------

@@ -27,7 +27,7 @@ class CostConfig:
     seed : int
         Master seed (non-negative); each study draws its own streams from it.
     studies : tuple of str
-        The studies to run, of :data:`STUDIES` (run and reported in that order).
+        The studies to run, of ``kinred.experiments.cost.STUDIES`` (run and reported in that order).
     configs : mapping, optional
         ``{name: config}`` with the config class of each study (``REGISTRY[name].Config``);
         a study missing here gets its full preset.
