@@ -58,7 +58,7 @@ __all__ = ["ConstantStep", "AdaptiveStep", "default_max_steps"]
 _STIFF_EVERY = 100
 #: Smallest relative tolerance (SciPy's ``solve_ivp``: 100 machine epsilons); below it the
 #: error of a step is round-off, not truncation.
-RTOL_MIN = 100 * np.finfo(float).eps
+RTOL_MIN = 100 * float(np.finfo(float).eps)
 _STIFF_HITS = 15
 
 

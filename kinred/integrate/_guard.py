@@ -78,7 +78,8 @@ GROWTH = 10.0
 #: 100 times it over any window of a 10⁶-step run has probability below 1e-10.
 GROWTH_NOISE = 100.0
 
-#: Relative round-off allowance of the second moment ``Σwᵢ|vᵢ|²`` (no cancellation in it).
+#: Relative allowance for round-off and truncation: ``Q`` may exceed the bound by this
+#: fraction of the largest ``Q`` accepted so far (and, uncentred, of ``Σwᵢ|vᵢ|²``).
 _ROUNDOFF = 1e-9
 
 #: Round-off allowance of the centred ``Q``, relative to ``Σwᵢ|vᵢ|²``: ``Q`` is the weighted
@@ -165,6 +166,7 @@ class Guard:
         self.lo = math.inf
         self.anchor = (t0, 0.0)
         self.q0 = self._q(v0)[0]
+        self.qmax = self.q0
         if not math.isfinite(self.q0):
             # velocities so large that their squares overflow float64 (|v| ~ 1e154 and up):
             # the guard cannot compare energies; the non-finite check stays on
@@ -209,8 +211,9 @@ class Guard:
         if not math.isfinite(q):
             return None                     # the non-finite check reports it
         bound = self.bound(t)
-        if q <= self.growth * bound + slack:
+        if q <= self.growth * bound + _ROUNDOFF * self.qmax + slack:
             self._update(t, q)
+            self.qmax = max(self.qmax, q)
             return None
         return self._reason(t, v, bound)
 
