@@ -569,9 +569,14 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
     Cost: the counts are exact Python integers of any size and nothing loops once per atom
     (lowering a count is done in closed form, unit trades only where a float sum resolves
     them), so ``eps=1e-300`` on 200 coordinates (counts of 58 000 digits) takes about as long
-    as ``eps=0.1``. The search works in floating point, so it refuses (``InvalidInput``) an
-    ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would give one coordinate more
-    than 1e305 atoms.
+    as ``eps=0.1``. The branch and bound keeps its own stack (no recursion), and a node costs
+    ``O(log d)`` on top of the candidates it scores, so any number of coordinates works:
+    10⁴ unit widths at ``eps=100`` take a few seconds (the node limit bounds the search, the
+    local improvement is vectorized). In atoms mode the local improvement still tries every
+    pair of the coordinates with more than one atom, so a budget spreading atoms over about
+    10³ coordinates takes tens of seconds. The search works in floating point, so it refuses
+    (``InvalidInput``) an ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would
+    give one coordinate more than 1e305 atoms.
 
     Parameters
     ----------
