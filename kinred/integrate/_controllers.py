@@ -131,7 +131,7 @@ class AdaptiveStep:
     ----------
     rtol, atol : float
         Relative (``> 0``) and absolute (``≥ 0``) tolerances. As in SciPy's ``solve_ivp``,
-        an ``rtol`` below :data:`RTOL_MIN` (100 machine epsilons) is raised to it with a
+        an ``rtol`` below 100 machine epsilons (``2.2e-14``) is raised to it with a
         :class:`~kinred.errors.KinredWarning`; with ``atol = 0`` a component whose error is
         exactly 0 meets the tolerance even where its scale is 0 (a coordinate that stays 0),
         and a non-zero error over a zero scale rejects the step.
