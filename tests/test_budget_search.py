@@ -136,6 +136,33 @@ def _trades_pairwise(s, N, tot, lim, moves, max_moves):
     return N, tot, moves
 
 
+def _local_atoms_pairwise(s, N, P, max_moves):
+    """The local improvement of atoms mode with its O(d²) loop over pairs (main before issue 21)."""
+    N, moves, changed = list(N), 0, True
+    while changed:
+        changed = False
+        prod = math.prod(N)
+        for j in range(len(N)):
+            if prod // N[j] * (N[j] + 1) <= P:
+                N2 = P // (prod // N[j])
+                prod, N[j], changed = prod // N[j] * N2, N2, True
+            if N[j] == 1:
+                break
+        act, targets = _budget._pairs(N)
+        for i in act:
+            for j in targets:
+                if i == j or N[i] < 2:
+                    continue
+                for di, dj in ((N[i] - 1, N[j] + 1), (N[i] // 2, N[j] * 2)):
+                    if di < 1 or moves >= max_moves:
+                        continue
+                    p2 = prod // (N[i] * N[j]) * di * dj
+                    old = _budget._ratio(s[i], N[i]) + _budget._ratio(s[j], N[j])
+                    if p2 <= P and _budget._ratio(s[i], di) + _budget._ratio(s[j], dj) < old - 1e-15:
+                        N[i], N[j], prod, moves, changed = di, dj, p2, moves + 1, True
+    return N
+
+
 # ------------------------------------------------------------- strategies
 def _widths(kind, d, a, b):
     rng = np.random.default_rng(int(a * 1e6) + d)
@@ -215,6 +242,22 @@ def test_vectorized_trades_equal_the_pairwise_loop(d, seed, max_moves):
     assert (got, tot2, moves) == ref
 
 
+@settings(max_examples=40)
+@given(st.integers(2, 120), st.integers(0, 2**32 - 1), st.sampled_from(["uniform", "ties", "equal"]),
+       st.integers(0, 400), st.sampled_from([3, 100, 20000]))
+def test_filtered_atom_trades_equal_the_pairwise_loop(d, seed, kind, log_p, max_moves):
+    """Atoms mode's local improvement: numpy rules out pairs, the survivors are tested as the
+    loop over pairs tests them (counts up to 10⁴⁰⁰, beyond the float range)."""
+    rng = np.random.default_rng(seed)
+    s = {"uniform": lambda: rng.uniform(0.01, 1.0, d), "equal": lambda: np.full(d, 0.7),
+         "ties": lambda: rng.choice([0.25, 0.5, 1.0], d)}[kind]()
+    s = sorted(s.tolist(), reverse=True)
+    P = 10**log_p
+    N = [1] * d
+    N[0] = P  # the raise step spreads it; the trades rebalance
+    assert _budget._local_atoms(s, N, P, max_moves) == _local_atoms_pairwise(s, N, P, max_moves)
+
+
 # ------------------------------------------------------------- high dimension
 def test_budget_of_1200_equal_widths():
     """Issue 21: RecursionError on main. c σ = 1/2 on 1200 coordinates at eps = 1: 600 each."""
@@ -244,3 +287,15 @@ def test_budget_at_ten_thousand_coordinates(widths):
     assert b.n_atoms == math.prod(b.counts) <= b.recipe.n_atoms
     if widths[0] == widths[-1]:  # equal widths: 10⁴ · 0.5 / 100 = 50 atoms each, proved optimal
         assert b.optimal and b.counts == (50,) * 10_000
+
+
+def test_atom_budget_at_ten_thousand_coordinates():
+    """Atoms mode at d = 10⁴ with about 5 000 coordinates above one atom: a few seconds (the
+    pairwise trades of main make 10⁷ Python steps per pass there)."""
+    widths = np.random.default_rng(0).uniform(0.5, 1.0, 10_000)
+    t0 = time.perf_counter()
+    b = budget(widths, atoms=10**3000)
+    assert time.perf_counter() - t0 < 60
+    assert b.n_atoms == math.prod(b.counts) <= 10**3000 and b.k_bar > 1000
+    assert b.bound == pytest.approx(sum(0.5 * w / n for w, n in zip(widths, b.counts)), rel=1e-12)
+    assert b.lower_bound <= b.bound * (1 + 1e-12)

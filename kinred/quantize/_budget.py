@@ -11,6 +11,7 @@ import numpy as np
 from .._validate import as_array, as_choice, as_float, as_int
 from ..errors import InvalidInput
 from ._size import fmt_count
+from ._trades import _UNIT_STEP, _pairs, _ratio, _trades_atoms, _trades_eps  # noqa: F401
 
 __all__ = ["Budget", "Recipe", "budget", "paper_recipe", "RULE_CONSTANT"]
 
@@ -21,8 +22,6 @@ RULE_CONSTANT = {"midpoint": 0.5, "paper": 1.0}
 _TOL = 1e-12
 #: Largest ``d · Σ c σⱼ / ε`` the floating-point search accepts (every N_j stays below it).
 _MAX_SCALE = 1e305
-#: Counts above which a ±1 change of N_j is not resolved by a float sum (no unit trades there).
-_UNIT_STEP = 2**30
 #: Suffixes up to this many coordinates are scanned by the relaxations; longer ones are bisected.
 _SCAN = 32
 
@@ -30,11 +29,6 @@ _SCAN = 32
 def _ceil_ratio(x: float, y: Fraction) -> int:
     """``max(1, ⌈x / y⌉)`` in exact arithmetic, for any float ``x`` and rational ``y > 0``."""
     return max(1, math.ceil(Fraction(x) / y))
-
-
-def _ratio(x: float, n: int) -> float:
-    """``x / n`` for an integer ``n`` of any size (float division overflows past 1e308)."""
-    return x / n if n.bit_length() < 1000 else float(Fraction(x) / n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -428,43 +422,6 @@ def _local_eps(s, N, eps, max_moves):
     return N
 
 
-def _trades_eps(s, N, tot, lim, moves, max_moves):
-    """Unit trades (N_i − 1, N_j + 1) with N_i ≤ N_j that keep the bound ≤ ``lim``, in place.
-
-    For each i (in index order) the trades go to the first j, in index order, with a feasible
-    one; the feasibility of every j is evaluated at once with numpy in the scalar formula's
-    order of operations (IEEE: the same floats as the loop over pairs, which is O(d²)
-    Python steps). Returns (bound, moves, whether anything traded).
-    """
-    act = [i for i in range(len(N)) if 1 < N[i] <= _UNIT_STEP]
-    if len(act) < 2:
-        return tot, moves, False
-    sa = np.array([s[i] for i in act])
-    na = np.array([float(N[i]) for i in act])  # exact: N_j ≤ 2**30 + max_moves
-    traded = False
-    for a, i in enumerate(act):
-        p = 0  # next position in act to try
-        while moves < max_moves and N[i] > 1 and p < len(act):
-            base = tot - s[i] / N[i] + s[i] / (N[i] - 1)
-            new = base - sa[p:] / na[p:] + sa[p:] / (na[p:] + 1)
-            ok = (na[p:] >= N[i]) & (new <= lim)
-            if a >= p:
-                ok[a - p] = False
-            hits = np.flatnonzero(ok)
-            if hits.size == 0:
-                break
-            b = p + int(hits[0])
-            tot = float(new[hits[0]])
-            N[i] -= 1
-            N[act[b]] += 1
-            na[a] -= 1.0
-            na[b] += 1.0
-            moves += 1
-            traded = True
-            p = b + 1
-    return tot, moves, traded
-
-
 def _round_eps(s, eps, mu):
     """Smallest scaling t ≤ 1 of the continuous solution whose ceiling is still feasible."""
     if not 0 < mu < math.inf:  # numerical corner of the relaxation: μ = d/ε is always feasible
@@ -504,12 +461,6 @@ def _floor_atoms(s, P, nu):
     return N
 
 
-def _pairs(N):
-    act = [i for i in range(len(N)) if N[i] > 1]
-    nxt = next((i for i in range(len(N)) if N[i] == 1), None)
-    return act, act + ([nxt] if nxt is not None else [])
-
-
 def _local_atoms(s, N, P, max_moves):
     """Local improvement: raise N_j while ∏ ≤ P, then trade pairs (at most ``max_moves``)."""
     N = list(N)
@@ -526,20 +477,8 @@ def _local_atoms(s, N, P, max_moves):
                 changed = True
             if N[j] == 1:
                 break
-        act, targets = _pairs(N)
-        for i in act:
-            for j in targets:
-                if i == j or N[i] < 2:
-                    continue
-                for di, dj in ((N[i] - 1, N[j] + 1), (N[i] // 2, N[j] * 2)):
-                    if di < 1 or moves >= max_moves:
-                        continue
-                    p2 = prod // (N[i] * N[j]) * di * dj
-                    old = _ratio(s[i], N[i]) + _ratio(s[j], N[j])
-                    if p2 <= P and _ratio(s[i], di) + _ratio(s[j], dj) < old - 1e-15:
-                        N[i], N[j], prod = di, dj, p2
-                        moves += 1
-                        changed = True
+        prod, moves, traded = _trades_atoms(s, N, P, prod, moves, max_moves)
+        changed = changed or traded
     return N
 
 
@@ -572,9 +511,9 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
     as ``eps=0.1``. The branch and bound keeps its own stack (no recursion), and a node costs
     ``O(log d)`` on top of the candidates it scores, so any number of coordinates works:
     10⁴ unit widths at ``eps=100`` take a few seconds (the node limit bounds the search, the
-    local improvement is vectorized). In atoms mode the local improvement still tries every
-    pair of the coordinates with more than one atom, so a budget spreading atoms over about
-    10³ coordinates takes tens of seconds. The search works in floating point, so it refuses
+    local improvement filters its trades with numpy; atoms mode at d = 10⁴ takes seconds
+    too, though equal widths, whose trades tie, still test most pairs one by one). The
+    search works in floating point, so it refuses
     (``InvalidInput``) an ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would
     give one coordinate more than 1e305 atoms.
 
