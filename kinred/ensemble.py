@@ -218,12 +218,33 @@ def _fn_name(fn) -> str:
     return f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', repr(fn))}"
 
 
+def _fn_identity(fn) -> str:
+    """``module.qualname`` of a member function, as :func:`config_hash` hashes it.
+
+    The module tells apart functions of one name (``table1.member`` and
+    ``calibrate_table1.member`` are both ``member``). A function of the script being run
+    (module ``__main__``) is named by the module it is when imported: ``python -m pkg.mod``
+    gives ``pkg.mod``, ``python path/run.py`` gives ``run``, so a run started as a script
+    resumes from ``import run``.
+    """
+    module = getattr(fn, "__module__", None) or "?"
+    if module == "__main__":
+        main = sys.modules.get("__main__")
+        spec = getattr(main, "__spec__", None)
+        if spec is not None and getattr(spec, "name", None):
+            module = spec.name
+        elif getattr(main, "__file__", None):
+            module = Path(main.__file__).stem
+    return f"{module}.{getattr(fn, '__qualname__', repr(fn))}"
+
+
 def config_hash(master_seed: int, members: list[dict], fn_qualname: str, config=None) -> str:
     """SHA-256 of the canonical JSON of what determines a run's results.
 
-    Hashed: the master seed, the member list, the function's ``__qualname__`` and the optional
-    user ``config``. The function's module is recorded in ``run.json`` but not hashed (a
-    script run as ``__main__`` and imported as a module is the same function).
+    Hashed: the master seed, the member list, the function's name ``fn_qualname`` (as
+    :func:`run_ensemble` calls it: ``_fn_identity``, ``module.qualname``, so a store does
+    not resume with another module's function of the same name) and the optional user
+    ``config``.
 
     Examples
     --------
@@ -714,7 +735,7 @@ def run_ensemble(
         fn, members, master_seed, executor, workers, scheduler, store, resume)
     progress = as_bool(progress, "progress")
     config_json = _plain(config, "config") if config is not None else None
-    chash = config_hash(master_seed, members, getattr(fn, "__qualname__", repr(fn)), config_json)
+    chash = config_hash(master_seed, members, _fn_identity(fn), config_json)
 
     t_start = time.perf_counter()
     n = len(members)

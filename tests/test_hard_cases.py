@@ -9,9 +9,9 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 
-from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Morse, Noise, Scene,
-                             SelfPropulsion)
-from kinred.errors import InvalidInput, NotConverged, SimulationDiverged
+from kinred.dynamics import (Alignment, AttractionRepulsion, CuckerSmale, Field, Morse, Noise,
+                             Scene, SelfPropulsion)
+from kinred.errors import InvalidInput, KinredWarning, NotConverged, SimulationDiverged
 from kinred.integrate import BS32, DOPRI5, EULER, HEUN, RK4, SaveAt, simulate
 from kinred.integrate._guard import energy_budget, real_stability
 from kinred.observables import above_floor, gamma, gamma_floor
@@ -473,9 +473,14 @@ def test_adaptive_step_budget_and_floor():
     with pytest.raises(NotConverged,
                        match=r"stopped at t=0\.\d+ of t1=1: the step budget max_steps=20 is spent"):
         simulate(sc, x0, v0, (0, 1), 0.1, method="rk45", rtol=1e-10, atol=1e-12, max_steps=20)
-    # a tolerance below round-off cannot be met: the step shrinks to the floor 1e-12·span
-    with pytest.raises(NotConverged, match=r"below the floor 1e-12"):
-        simulate(sc, x0, v0, (0, 1), 0.1, method="rk23", rtol=1e-30, atol=0.0)
+    # a jump of the drift at t = 0.5 cannot be stepped over within rtol = 100 eps (the floor
+    # of rtol, issue 21): the step shrinks to the floor 1e-12·span
+    jump = Scene([Field(lambda t, x, v: np.full_like(x, 1.0 if t < 0.5 else -1.0))])
+    with pytest.warns(KinredWarning, match="below 100 machine epsilons"):
+        with pytest.raises(NotConverged, match=r"at t=0\.5 of t1=1: the step size fell to "
+                                               r".* below the floor 1e-12"):
+            simulate(jump, np.ones((3, 2)), np.zeros((3, 2)), (0, 1), 0.1, method="rk23",
+                     rtol=1e-30, atol=0.0)
     with pytest.raises(InvalidInput, match="max_steps must be >= 1, got 0"):
         simulate(sc, x0, v0, (0, 1), 0.1, method="rk45", max_steps=0)
 

@@ -30,6 +30,7 @@ evaluation.
 
 from __future__ import annotations
 
+import threading
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -45,6 +46,8 @@ __all__ = ["Scene", "ProjectedSystem", "project_state"]
 
 #: Plans kept per scene (e.g. a few shapes or thread counts in one session).
 _PLANS_KEEP = 4
+#: Guards every scene's plan cache (plans are built rarely; a lock per scene would not pickle).
+_PLANS_LOCK = threading.RLock()
 
 
 class ProjectedSystem(NamedTuple):
@@ -187,12 +190,15 @@ class Scene:
     def _plan(self, n: int, dim: int):
         """The backend's plan for states ``(n, dim)`` and the current engine threads (kept)."""
         key = (n, dim, _parallel.get_num_threads())
-        plan = self._plans.get(key)
+        plan = self._plans.get(key)  # one dict read: atomic, the hot path takes no lock
         if plan is None:
-            plan = self.pairsum.plan(self, n, dim)
-            while len(self._plans) >= _PLANS_KEEP:
-                self._plans.pop(next(iter(self._plans)), None)
-            self._plans[key] = plan
+            with _PLANS_LOCK:  # two threads simulating this scene: one builds, one evicts
+                plan = self._plans.get(key)
+                if plan is None:
+                    plan = self.pairsum.plan(self, n, dim)
+                    while len(self._plans) >= _PLANS_KEEP:
+                        self._plans.pop(next(iter(self._plans)), None)
+                    self._plans[key] = plan
         return plan
 
     def _check_state(self, x, v, names=("x", "v")):

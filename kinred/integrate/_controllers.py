@@ -41,12 +41,13 @@ raises :class:`~kinred.errors.SimulationDiverged`.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._validate import as_float, as_int
-from ..errors import InvalidInput, NotConverged
+from ..errors import InvalidInput, KinredWarning, NotConverged
 from ._guard import diverged
 
 __all__ = ["ConstantStep", "AdaptiveStep", "default_max_steps"]
@@ -55,6 +56,9 @@ __all__ = ["ConstantStep", "AdaptiveStep", "default_max_steps"]
 #: it is positive); ``_STIFF_HITS`` consecutive positives declare the problem stiff, six
 #: negatives reset the count (Hairer's constants, with 100 instead of 1000).
 _STIFF_EVERY = 100
+#: Smallest relative tolerance (SciPy's ``solve_ivp``: 100 machine epsilons); below it the
+#: error of a step is round-off, not truncation.
+RTOL_MIN = 100 * float(np.finfo(float).eps)
 _STIFF_HITS = 15
 
 
@@ -126,7 +130,11 @@ class AdaptiveStep:
     Parameters
     ----------
     rtol, atol : float
-        Relative (``> 0``) and absolute (``≥ 0``) tolerances.
+        Relative (``> 0``) and absolute (``≥ 0``) tolerances. As in SciPy's ``solve_ivp``,
+        an ``rtol`` below 100 machine epsilons (``2.2e-14``) is raised to it with a
+        :class:`~kinred.errors.KinredWarning`; with ``atol = 0`` a component whose error is
+        exactly 0 meets the tolerance even where its scale is 0 (a coordinate that stays 0),
+        and a non-zero error over a zero scale rejects the step.
     max_steps : int, optional
         Budget of accepted plus rejected steps; default ``max(100 000, 1000·⌈(t1 − t0)/dt⌉)``.
     safety : float
@@ -157,6 +165,11 @@ class AdaptiveStep:
     def __post_init__(self):
         fix = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
         fix("rtol", as_float(self.rtol, "rtol", low=0.0, low_open=True))
+        if self.rtol < RTOL_MIN:
+            warnings.warn(f"rtol={self.rtol!r} is below 100 machine epsilons, where the error "
+                          f"estimate is round-off; using rtol={RTOL_MIN!r}", KinredWarning,
+                          stacklevel=3)
+            fix("rtol", RTOL_MIN)
         fix("atol", as_float(self.atol, "atol", low=0.0))
         if self.max_steps is not None:
             fix("max_steps", as_int(self.max_steps, "max_steps", low=1))
@@ -170,6 +183,20 @@ class AdaptiveStep:
     def init(self, solver, t0: float, t1: float, dt: float, method: str) -> "_Adaptive":
         """Per-run state for ``solver`` (its order and the order of its error estimate)."""
         return _Adaptive(self, solver, t0, t1, dt, method)
+
+
+def _sq_ratio(e, scale, atol) -> float:
+    """``Σ (e/scale)²``, where an exact zero error counts 0 even over a zero scale (``atol = 0``
+    on a component that stays 0: ``0/0``, which met the tolerance, not a non-finite drift)."""
+    if atol > 0:
+        return float(np.sum((e / scale) ** 2))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return float(np.sum(np.where(e == 0, 0.0, (e / scale) ** 2)))
+
+
+def _finite(new, err) -> bool:
+    """Whether the proposed state and its error estimate are finite (else the drift is not)."""
+    return all(a is None or bool(np.isfinite(a).all()) for a in (*new, *err))
 
 
 class _Stiffness:
@@ -225,11 +252,11 @@ class _Adaptive:
         cfg = self.cfg
         (x, v), (xn, vn), (ex, ev) = state, new, err
         sc = cfg.atol + cfg.rtol * np.maximum(np.abs(x), np.abs(xn))
-        err2 = float(np.sum((ex / sc) ** 2))
+        err2 = _sq_ratio(ex, sc, cfg.atol)
         cnt = ex.size
         if v is not None:
             scv = cfg.atol + cfg.rtol * np.maximum(np.abs(v), np.abs(vn))
-            err2 += float(np.sum((ev / scv) ** 2))
+            err2 += _sq_ratio(ev, scv, cfg.atol)
             cnt += ev.size
         return math.sqrt(err2 / cnt)
 
@@ -240,7 +267,9 @@ class _Adaptive:
             raise InvalidInput(f"method={self.method!r} is registered as adaptive but its step "
                                f"returned no error estimate")
         e = self._norm(state, new, err)
-        if not math.isfinite(e):
+        if not math.isfinite(e) and _finite(new, err):
+            e = math.inf  # a finite error beyond a zero scale (atol = 0): an ordinary rejection
+        elif not math.isfinite(e):
             self.h = hh * cfg.min_factor
             self.n_rejected += 1
             if self.h < self.floor_at:

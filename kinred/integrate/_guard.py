@@ -78,8 +78,16 @@ GROWTH = 10.0
 #: 100 times it over any window of a 10⁶-step run has probability below 1e-10.
 GROWTH_NOISE = 100.0
 
-#: Relative round-off allowance: ``Q`` of the centred frame is ``Σwᵢ|vᵢ|² − |v̄|²``.
+#: Relative allowance for round-off and truncation: ``Q`` may exceed the bound by this
+#: fraction of the largest ``Q`` accepted so far (and, uncentred, of ``Σwᵢ|vᵢ|²``).
 _ROUNDOFF = 1e-9
+
+#: Round-off allowance of the centred ``Q``, relative to ``Σwᵢ|vᵢ|²``: ``Q`` is the weighted
+#: mean of squared deviations (no cancellation: ``Σwᵢ|vᵢ|² − |v̄|²`` lost every digit of a
+#: fluctuation of 1 beside a mean velocity of 1e8), so what remains is the rounding of the
+#: velocities themselves, whose Γ after n steps is below ``n u² Σwᵢ|vᵢ|²/3``
+#: (:func:`~kinred.observables.gamma_floor`, ``u = 2⁻⁵³``): 1e-20 covers 10¹² steps.
+_ROUNDOFF_CENTRED = 1e-20
 
 
 @dataclass
@@ -158,6 +166,7 @@ class Guard:
         self.lo = math.inf
         self.anchor = (t0, 0.0)
         self.q0 = self._q(v0)[0]
+        self.qmax = self.q0
         if not math.isfinite(self.q0):
             # velocities so large that their squares overflow float64 (|v| ~ 1e154 and up):
             # the guard cannot compare energies; the non-finite check stays on
@@ -166,12 +175,13 @@ class Guard:
         self._update(t0, self.q0)
 
     def _q(self, v):
+        """``(Q, round-off allowance)`` at velocities ``v``."""
         with np.errstate(over="ignore", invalid="ignore"):
             sq = float(self.w @ np.einsum("ij,ij->i", v, v))
             if self.budget.centred:
-                m = self.w @ v
-                return max(sq - float(m @ m), 0.0), sq
-        return sq, sq
+                dev = _obs._deviations(v, self.w)  # the compensated centre of Γ
+                return float(self.w @ np.einsum("ij,ij->i", dev, dev)), _ROUNDOFF_CENTRED * sq
+        return sq, _ROUNDOFF * sq
 
     def _key(self, t, q):
         b = self.budget
@@ -197,12 +207,13 @@ class Guard:
         """``None`` if ``Q(t)`` is within the bound, else the reason to stop (one sentence)."""
         if not self.active:
             return None
-        q, sq = self._q(v)
+        q, slack = self._q(v)
         if not math.isfinite(q):
             return None                     # the non-finite check reports it
         bound = self.bound(t)
-        if q <= self.growth * bound + _ROUNDOFF * sq:
+        if q <= self.growth * bound + _ROUNDOFF * self.qmax + slack:
             self._update(t, q)
+            self.qmax = max(self.qmax, q)
             return None
         return self._reason(t, v, bound)
 
@@ -233,8 +244,11 @@ def real_stability(table: RKTable) -> float:
     >>> real_stability(EULER), round(real_stability(RK4), 3)
     (2.0, 2.785)
     """
-    if table.name in _STABILITY:
-        return _STABILITY[table.name]
+    # cached by content: two tables with one name (a user's "rk4" that is Heun) differ
+    A, B = np.asarray(table.A, dtype=float), np.asarray(table.B, dtype=float)
+    key = (A.shape, A.tobytes(), B.tobytes())
+    if key in _STABILITY:
+        return _STABILITY[key]
     s = table.stages
     one = np.ones(s)
 
@@ -253,7 +267,7 @@ def real_stability(table: RKTable) -> float:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if amp(mid) <= 1.0 + 1e-12 else (lo, mid)
     val = round(-lo, 6)
-    _STABILITY[table.name] = val
+    _STABILITY[key] = val
     return val
 
 

@@ -50,6 +50,7 @@ entries (close or coincident pairs) are recomputed by differences, with relative
 from __future__ import annotations
 
 import collections
+import threading
 
 import numpy as np
 from numba import njit
@@ -58,6 +59,7 @@ from .. import _parallel
 
 __all__ = [
     "COUNTERS",
+    "count",
     "sqdist_diff",
     "sqdist_rows",
     "tau_for",
@@ -72,6 +74,14 @@ __all__ = [
 #: source (``"x"`` or ``"v"``). Tests use it to prove that a scene computes only what its
 #: effects need.
 COUNTERS: collections.Counter = collections.Counter()
+_COUNTERS_LOCK = threading.Lock()
+
+
+def count(source: str, n: int = 1) -> None:
+    """``COUNTERS[source] += n`` under a lock: pool threads and concurrent simulations count
+    (``+=`` on a Counter is a read and a write another thread can interleave)."""
+    with _COUNTERS_LOCK:
+        COUNTERS[source] += n
 
 
 _FM = {"reassoc", "contract"}

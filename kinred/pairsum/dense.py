@@ -318,7 +318,7 @@ class Dense:
         accs = _parallel.run_parallel(work, list(plan.groups))
         if plan.worker is not None:
             for s in plan.terms.sources:
-                _kernels.COUNTERS[s] += len(plan.strips)
+                _kernels.count(s, len(plan.strips))
         return _finish(plan, accs, ws["centred"])
 
 
@@ -449,6 +449,7 @@ def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_st
         A.fill(0.0)
     n = plan.n
     qbuf, pbuf = ws["q"][g], ws["phi"][g]
+    done = 0
     for i0, i1 in my_strips:
         bb, m = i1 - i0, n - i0
         for s, terms in zip(plan.terms.sources, plan.loop):
@@ -460,7 +461,6 @@ def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_st
                 R = state[s]
                 _kernels.sqdist_block(Y[i0:i1], Y[i0:], nn[i0:i1], nn[i0:], q, R[i0:i1], R[i0:],
                                       diag=0)
-            _kernels.COUNTERS[s] += 1
             for idx, (t, value_sq) in enumerate(terms):
                 # the last term of a source may overwrite the distances
                 phi = q if idx == len(terms) - 1 else pbuf[: bb * m].reshape(bb, m)
@@ -469,6 +469,9 @@ def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_st
                 else:
                     phi[...] = t.kernel(np.sqrt(q))
                 _pair_products(phi, ws["zext"][t.carrier], acc[(t.target, t.carrier)], i0, i1, n)
+        done += 1
+    for s in plan.terms.sources:  # once per call: one lock per source, not per strip
+        _kernels.count(s, done)
     return acc
 
 

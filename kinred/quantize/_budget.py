@@ -11,6 +11,7 @@ import numpy as np
 from .._validate import as_array, as_choice, as_float, as_int
 from ..errors import InvalidInput
 from ._size import fmt_count
+from ._trades import _UNIT_STEP, _pairs, _ratio, _trades_atoms, _trades_eps  # noqa: F401
 
 __all__ = ["Budget", "Recipe", "budget", "paper_recipe", "RULE_CONSTANT"]
 
@@ -21,18 +22,13 @@ RULE_CONSTANT = {"midpoint": 0.5, "paper": 1.0}
 _TOL = 1e-12
 #: Largest ``d · Σ c σⱼ / ε`` the floating-point search accepts (every N_j stays below it).
 _MAX_SCALE = 1e305
-#: Counts above which a ±1 change of N_j is not resolved by a float sum (no unit trades there).
-_UNIT_STEP = 2**30
+#: Suffixes up to this many coordinates are scanned by the relaxations; longer ones are bisected.
+_SCAN = 32
 
 
 def _ceil_ratio(x: float, y: Fraction) -> int:
     """``max(1, ⌈x / y⌉)`` in exact arithmetic, for any float ``x`` and rational ``y > 0``."""
     return max(1, math.ceil(Fraction(x) / y))
-
-
-def _ratio(x: float, n: int) -> float:
-    """``x / n`` for an integer ``n`` of any size (float division overflows past 1e308)."""
-    return x / n if n.bit_length() < 1000 else float(Fraction(x) / n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +165,13 @@ class _Abort(Exception):
 
 
 class _Solver:
-    """Branch and bound over non-increasing integer vectors for decreasing s > 0."""
+    """Branch and bound over non-increasing integer vectors for decreasing s > 0.
+
+    The search is depth-first with an explicit stack (one frame per coordinate: a scene of
+    d = 10⁴ coordinates is 10⁴ levels deep, far beyond Python's recursion limit), and the
+    relaxation of a suffix finds its active set by bisection (:meth:`cont_eps`,
+    :meth:`cont_atoms`), so one level costs O(log d) instead of O(d).
+    """
 
     def __init__(self, s: np.ndarray, node_limit: int):
         # Python floats: the search is scalar code, and numpy scalars cost several times more
@@ -177,6 +179,7 @@ class _Solver:
         self.d = s.size
         self.T = np.concatenate([np.cumsum(s[::-1])[::-1], [0.0]]).tolist()
         self.L = np.concatenate([[0.0], np.cumsum(np.log(s))]).tolist()
+        self.logs = np.log(s).tolist()
         self.nodes = 0
         self.node_limit = node_limit
 
@@ -185,38 +188,86 @@ class _Solver:
         if self.nodes > self.node_limit:
             raise _Abort
 
+    def _first(self, n: int, cond, crossed) -> int | None:
+        """First ``m`` in 1..n with ``cond(m)``, as the scan ``for m in range(1, n + 1)`` finds it.
+
+        Suffixes of at most :data:`_SCAN` coordinates are scanned. Longer ones bisect the
+        monotone ``crossed(m)`` (the m-th coordinate of the suffix is inactive at the optimum:
+        exactly where ``cond`` holds, up to rounding), then test ``cond`` on a few ``m``
+        around the crossing; the full scan is the fallback if none holds there.
+        """
+        if n > _SCAN:
+            lo, hi = 1, n + 1  # crossed(n + 1) is True by convention
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if crossed(mid):
+                    hi = mid
+                else:
+                    lo = mid + 1
+            m0 = lo - 1  # last active coordinate
+            window = range(max(1, m0 - 2), min(n, m0 + 2) + 1)
+            hit = next((m for m in window if cond(m)), None)
+            if hit is not None and not any(cond(m) for m in range(max(1, hit - 4), hit)):
+                return hit
+        return next((m for m in range(1, n + 1) if cond(m)), None)
+
     # ---- eps mode: min Σ log N s.t. Σ s/N ≤ e --------------------------------------------
     def cont_eps(self, j: int, e: float) -> tuple[float, float]:
-        """Continuous relaxation on suffix j: (min Σ log N_i, multiplier μ); N_i = max(1, μ s_i)."""
+        """Continuous relaxation on suffix j: (min Σ log N_i, multiplier μ); N_i = max(1, μ s_i).
+
+        Coordinate ``j + m − 1`` is active iff ``H = (m − 1) s_{j+m−1} + T_{j+m−1} > e`` (H is
+        non-increasing in m), and μ = m / (e − T_{j+m}) for the m active ones.
+        """
         T, s, d = self.T, self.s, self.d
         if T[j] <= e * (1 + _TOL):
             return 0.0, 0.0
         if e <= 0:
             return math.inf, math.inf
-        for m in range(1, d - j + 1):
+
+        def cond(m):
             rest = e - T[j + m]
             if rest <= 0:
-                continue
+                return False
             mu = m / rest
-            if mu * s[j + m - 1] >= 1 - 1e-12 and (j + m == d or mu * s[j + m] <= 1 + 1e-12):
-                return m * math.log(mu) + (self.L[j + m] - self.L[j]), mu
-        return 0.0, 0.0  # numerical corner: trivial (valid) lower bound
+            return mu * s[j + m - 1] >= 1 - 1e-12 and (j + m == d or mu * s[j + m] <= 1 + 1e-12)
+
+        def crossed(m):
+            return m > d - j or (m - 1) * s[j + m - 1] + T[j + m - 1] <= e
+
+        m = self._first(d - j, cond, crossed)
+        if m is None:
+            return 0.0, 0.0  # numerical corner: trivial (valid) lower bound
+        mu = m / (e - T[j + m])
+        return m * math.log(mu) + (self.L[j + m] - self.L[j]), mu
 
     def solve_eps(self, eps: float, incumbent: list[int]) -> tuple[list[int], bool]:
         self.best = list(incumbent)
         self.best_P = math.prod(incumbent)
         try:
-            self._dfs_eps(0, eps, None, 1, [])
+            path, stack = [], []
+            self._node_eps(stack, path, 0, eps, None, 1)
+            while stack:
+                j, e, prod, cands = stack[-1]
+                if not cands:
+                    stack.pop()
+                    continue
+                v, n = cands.pop()  # cands are sorted decreasingly: the most promising first
+                if v > math.log(self.best_P - 1) + 1e-9:
+                    continue
+                del path[j:]
+                path.append(n)
+                self._node_eps(stack, path, j + 1, e - self.s[j] / n, n, prod * n)
             return self.best, True
         except _Abort:
             return self.best, False
 
-    def _dfs_eps(self, j, e, cap, prod, path):
+    def _node_eps(self, stack, path, j, e, cap, prod):
+        """Visit node (j, e): record a leaf, or push its children (n, lower bound) for the search."""
         self._tick()
         s, T = self.s, self.T
         if T[j] <= e * (1 + _TOL):
             if prod < self.best_P:
-                self.best_P, self.best = prod, path + [1] * (self.d - j)
+                self.best_P, self.best = prod, path[:j] + [1] * (self.d - j)
             return
         if j == self.d:
             return
@@ -224,9 +275,10 @@ class _Solver:
             return
         thresh = math.log(self.best_P - 1) + 1e-9
         lo = max(2, _ceil_ratio(T[j], Fraction(e) * Fraction(1 + _TOL)))  # N_j ≥ T_j / e (exact)
-        hi = (self.best_P - 1) // prod
-        if cap is not None:
-            hi = min(hi, cap)
+        if cap is None:
+            hi = (self.best_P - 1) // prod
+        else:  # min(cap, (best_P − 1) // prod) without dividing two huge integers
+            hi = cap if prod * cap <= self.best_P - 1 else (self.best_P - 1) // prod
         if lo > hi:
             return
         _, mu = self.cont_eps(j, e)
@@ -240,45 +292,52 @@ class _Solver:
             self._tick()
             return lp + math.log(n) + self.cont_eps(j + 1, max(e2, 0.0))[0]
 
-        cands = []
-        n = start
-        while n >= lo:
-            v = f(n)
-            if v > thresh:
-                break
-            cands.append((v, n))
-            n -= 1
-        n = start + 1
-        while n <= hi:
-            v = f(n)
-            if v > thresh:
-                break
-            cands.append((v, n))
-            n += 1
-        for v, n in sorted(cands):
-            if v > math.log(self.best_P - 1) + 1e-9:
-                continue
-            self._dfs_eps(j + 1, e - s[j] / n, n, prod * n, path + [n])
+        cands = _scan(f, start, lo, hi, lambda v: v > thresh)
+        stack.append((j, e, prod, sorted(cands, reverse=True)))
 
     # ---- atoms mode: min Σ s/N s.t. Π N ≤ P ------------------------------------------------
     def cont_atoms(self, j: int, logR: float) -> tuple[float, float]:
-        """Continuous relaxation on suffix j with product ≤ e^logR: (min Σ s_i/N_i, ν), N_i = max(1, s_i/ν)."""
-        T, s, d = self.T, self.s, self.d
+        """Continuous relaxation on suffix j with product ≤ e^logR: (min Σ s_i/N_i, ν), N_i = max(1, s_i/ν).
+
+        Coordinate ``k = j + m − 1`` is active iff ``Σ_{j≤i≤k} log(s_i / s_k) < logR`` (non-decreasing
+        in m), and log ν = (Σ_{i<j+m} log s_i − logR) / m for the m active ones.
+        """
+        T, s, d, L = self.T, self.s, self.d, self.L
         if j >= d:
             return 0.0, math.inf
         if logR <= 1e-15:
             return float(T[j]), math.inf
-        for m in range(1, d - j + 1):
-            nu = math.exp((self.L[j + m] - self.L[j] - logR) / m)
-            if s[j + m - 1] >= nu * (1 - 1e-12) and (j + m == d or s[j + m] <= nu * (1 + 1e-12)):
-                return m * nu + float(T[j + m]), nu
-        return 0.0, math.inf
+
+        def cond(m):
+            nu = math.exp((L[j + m] - L[j] - logR) / m)
+            return s[j + m - 1] >= nu * (1 - 1e-12) and (j + m == d or s[j + m] <= nu * (1 + 1e-12))
+
+        def crossed(m):
+            return m > d - j or L[j + m] - L[j] - m * self.logs[j + m - 1] >= logR
+
+        m = self._first(d - j, cond, crossed)
+        if m is None:
+            return 0.0, math.inf
+        nu = math.exp((L[j + m] - L[j] - logR) / m)
+        return m * nu + float(T[j + m]), nu
 
     def solve_atoms(self, P: int, incumbent: list[int]) -> tuple[list[int], bool]:
         self.best = list(incumbent)
         self.best_v = self.value(incumbent)
         try:
-            self._dfs_atoms(0, P, None, 0.0, [])
+            path, stack = [], []
+            self._node_atoms(stack, path, 0, P, None, 0.0)
+            while stack:
+                j, R, cur, cands = stack[-1]
+                if not cands:
+                    stack.pop()
+                    continue
+                v, n = cands.pop()
+                if v >= self.best_v * (1 - 1e-13):
+                    continue
+                del path[j:]
+                path.append(n)
+                self._node_atoms(stack, path, j + 1, R // n, n, cur + _ratio(self.s[j], n))
             return self.best, True
         except _Abort:
             return self.best, False
@@ -286,20 +345,21 @@ class _Solver:
     def value(self, N) -> float:
         return float(sum(_ratio(si, ni) for si, ni in zip(self.s, N)))
 
-    def _dfs_atoms(self, j, R, cap, cur, path):
+    def _node_atoms(self, stack, path, j, R, cap, cur):
+        """Visit node (j, R): record a leaf, or push its children (n, lower bound) for the search."""
         self._tick()
         s, T = self.s, self.T
         if j == self.d or R == 1 or cap == 1:
             v = cur + float(T[j])
             if v < self.best_v * (1 - 1e-13):
-                self.best_v, self.best = v, path + [1] * (self.d - j)
+                self.best_v, self.best = v, path[:j] + [1] * (self.d - j)
             return
         thresh = self.best_v * (1 - 1e-13)
         hi = R if cap is None else min(cap, R)
         if j == self.d - 1:
             v = cur + _ratio(s[j], hi)
             if v < thresh:
-                self.best_v, self.best = v, path + [hi]
+                self.best_v, self.best = v, path[:j] + [hi]
             return
         logR = math.log(R)
         _, nu = self.cont_atoms(j, logR)
@@ -311,25 +371,29 @@ class _Solver:
             rest = self.cont_atoms(j + 1, logR - math.log(n))[0]
             return cur + _ratio(s[j], n) + max(rest, _ratio(float(T[j + 1]), n))
 
-        cands = []
-        n = start
-        while n >= 1:
-            v = f(n)
-            if v >= thresh:
-                break
-            cands.append((v, n))
-            n -= 1
-        n = start + 1
-        while n <= hi:
-            v = f(n)
-            if v >= thresh:
-                break
-            cands.append((v, n))
-            n += 1
-        for v, n in sorted(cands):
-            if v >= self.best_v * (1 - 1e-13):
-                continue
-            self._dfs_atoms(j + 1, R // n, n, cur + _ratio(s[j], n), path + [n])
+        cands = _scan(f, start, 1, hi, lambda v: v >= thresh)
+        stack.append((j, R, cur, sorted(cands, reverse=True)))
+
+
+def _scan(f, start, lo, hi, stop):
+    """``(f(n), n)`` for n = start, start − 1, … ≥ lo, then start + 1, … ≤ hi, each run ending
+    at the first n with ``stop(f(n))``."""
+    cands = []
+    n = start
+    while n >= lo:
+        v = f(n)
+        if stop(v):
+            break
+        cands.append((v, n))
+        n -= 1
+    n = start + 1
+    while n <= hi:
+        v = f(n)
+        if stop(v):
+            break
+        cands.append((v, n))
+        n += 1
+    return cands
 
 
 def _local_eps(s, N, eps, max_moves):
@@ -353,17 +417,8 @@ def _local_eps(s, N, eps, max_moves):
                 if n < N[j]:
                     tot, N[j] = tot - s[j] / N[j] + s[j] / n, n
                     changed = True
-        act = [i for i in range(len(N)) if 1 < N[i] <= _UNIT_STEP]
-        for i in act:
-            for j in act:
-                if i != j and 1 < N[i] <= N[j] and moves < max_moves:  # (N_i−1)(N_j+1) < N_i N_j
-                    new = tot - s[i] / N[i] + s[i] / (N[i] - 1) - s[j] / N[j] + s[j] / (N[j] + 1)
-                    if new <= lim:
-                        tot = new
-                        N[i] -= 1
-                        N[j] += 1
-                        moves += 1
-                        changed = True
+        tot, moves, traded = _trades_eps(s, N, tot, lim, moves, max_moves)
+        changed = changed or traded
     return N
 
 
@@ -406,12 +461,6 @@ def _floor_atoms(s, P, nu):
     return N
 
 
-def _pairs(N):
-    act = [i for i in range(len(N)) if N[i] > 1]
-    nxt = next((i for i in range(len(N)) if N[i] == 1), None)
-    return act, act + ([nxt] if nxt is not None else [])
-
-
 def _local_atoms(s, N, P, max_moves):
     """Local improvement: raise N_j while ∏ ≤ P, then trade pairs (at most ``max_moves``)."""
     N = list(N)
@@ -428,20 +477,8 @@ def _local_atoms(s, N, P, max_moves):
                 changed = True
             if N[j] == 1:
                 break
-        act, targets = _pairs(N)
-        for i in act:
-            for j in targets:
-                if i == j or N[i] < 2:
-                    continue
-                for di, dj in ((N[i] - 1, N[j] + 1), (N[i] // 2, N[j] * 2)):
-                    if di < 1 or moves >= max_moves:
-                        continue
-                    p2 = prod // (N[i] * N[j]) * di * dj
-                    old = _ratio(s[i], N[i]) + _ratio(s[j], N[j])
-                    if p2 <= P and _ratio(s[i], di) + _ratio(s[j], dj) < old - 1e-15:
-                        N[i], N[j], prod = di, dj, p2
-                        moves += 1
-                        changed = True
+        prod, moves, traded = _trades_atoms(s, N, P, prod, moves, max_moves)
+        changed = changed or traded
     return N
 
 
@@ -471,9 +508,14 @@ def budget(widths, *, eps: float | None = None, atoms: int | None = None,
     Cost: the counts are exact Python integers of any size and nothing loops once per atom
     (lowering a count is done in closed form, unit trades only where a float sum resolves
     them), so ``eps=1e-300`` on 200 coordinates (counts of 58 000 digits) takes about as long
-    as ``eps=0.1``. The search works in floating point, so it refuses (``InvalidInput``) an
-    ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would give one coordinate more
-    than 1e305 atoms.
+    as ``eps=0.1``. The branch and bound keeps its own stack (no recursion), and a node costs
+    ``O(log d)`` on top of the candidates it scores, so any number of coordinates works:
+    10⁴ unit widths at ``eps=100`` take a few seconds (the node limit bounds the search, the
+    local improvement filters its trades with numpy; atoms mode at d = 10⁴ takes seconds
+    too, though equal widths, whose trades tie, still test most pairs one by one). The
+    search works in floating point, so it refuses
+    (``InvalidInput``) an ``eps`` below ``d · Σ c σⱼ / 1e305`` or an atom budget that would
+    give one coordinate more than 1e305 atoms.
 
     Parameters
     ----------
