@@ -51,7 +51,7 @@ DEFAULT_RTOL = 1e-13
 
 #: Cap of the duals' round-off allowance, relative to the value: an exact result is proved
 #: within ``(DEFAULT_RTOL + MAX_NOISE_RTOL)·W1`` plus the round-off of the dual sum.
-MAX_NOISE_RTOL = 9e-13
+MAX_NOISE_RTOL = 1e-11
 
 #: Neighbours per atom of the candidate graph (from each side).
 DEFAULT_K = 8

@@ -202,8 +202,8 @@ def w1(
         SciPy does), which must be equal (relative 1e-9) when both are given.
     neighbors, rtol, max_iter, max_edges, max_seconds, max_bytes : optional
         ``method="sparse"``: nearest neighbours per atom from each side; the relative gap at
-        which the bounds meet (default 1e-13 plus the round-off of the duals); the budgets of
-        the column generation (solves, edges -- default four times the first graph --,
+        which the bounds meet (default 1e-13 plus the duals' round-off, at most 1e-11); the
+        budgets of the column generation (solves, edges -- default four times the first graph --,
         seconds -- default none); the memory limit of its preflight
         (``kinred._validate.check_alloc``, default ``KINRED_MAX_BYTES`` or 2 GiB).
     metric : {"euclidean", "l1"}
