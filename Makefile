@@ -30,7 +30,7 @@ demo: $(VENV)/.installed-base
 # test needs Debian's chromium: installed here with apt when run as root, otherwise one line
 # says the command to run (kinred.report._browser.find_chromium is the one place that looks).
 test: $(VENV)/.installed-test chromium
-	$(BIN)/python -m pytest -n auto --durations=15
+	$(BIN)/python -m pytest -n auto --dist worksteal --durations=15
 
 chromium: $(VENV)/.installed-base
 	@$(BIN)/python -c "from kinred.report._browser import find_chromium as f; f()" 2>/dev/null || { \
