@@ -26,12 +26,12 @@ $(VENV)/.installed-docs: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed-base
 	$(BIN)/kinred demo
 
-# The suite runs on every core, one worker more than the cores (pytest-xdist, work stealing:
-# many tests wait on a subprocess, a lock or a socket), and lists its slowest tests. The report's browser
+# The suite runs on every core (pytest-xdist; work stealing keeps both busy to the end) and
+# lists its slowest tests. The report's browser
 # test needs Debian's chromium: installed here with apt when run as root, otherwise one line
 # says the command to run (kinred.report._browser.find_chromium is the one place that looks).
 test: $(VENV)/.installed-test chromium
-	$(BIN)/python -m pytest -n $$(( $$(nproc) + 1 )) --dist worksteal --durations=15
+	$(BIN)/python -m pytest -n auto --dist worksteal --durations=15
 
 chromium: $(VENV)/.installed-base
 	@$(BIN)/python -c "from kinred.report._browser import find_chromium as f; f()" 2>/dev/null || { \

@@ -37,7 +37,7 @@ def test_ci_runs_exactly_the_readme_test_command():
 def test_make_test_brings_chromium_and_uses_every_core():
     plan = _make("-n", "test", check=True).stdout
     assert "find_chromium" in plan and "apt-get install -y -qq chromium" in plan
-    assert "pytest -n " in plan and "--durations" in plan
+    assert "pytest -n auto" in plan and "--durations" in plan
 
 
 def test_without_chromium_and_root_one_clear_line(tmp_path):
