@@ -36,22 +36,10 @@ configuration by a digest, loaded when present and computed when missing
 studies use it, with the same rules and messages.
 """
 
+from . import _files
 from ._files import (ResultFolder, _atomic_write, atomic_write_bytes, atomic_write_json,  # noqa: F401
                      atomic_write_npz, atomic_write_text, read_bytes, read_json, read_npz,
                      read_text, read_toml, to_jsonable)
 from ._stages import STAGE_DIGEST, StageStore  # noqa: F401
 
-__all__ = [
-    "atomic_write_bytes",
-    "atomic_write_text",
-    "atomic_write_json",
-    "atomic_write_npz",
-    "read_bytes",
-    "read_text",
-    "read_json",
-    "read_npz",
-    "read_toml",
-    "to_jsonable",
-    "ResultFolder",
-    "StageStore",
-]
+__all__ = [*_files.__all__, "StageStore"]
