@@ -194,17 +194,9 @@ def _coordinates(tables, source, where) -> list[Measure]:
             raise _err(source, f"{key}.params", f"invalid parameters for {name}: {exc}") from None
         if not (scale > 0) or not bool(np.all(gen._argcheck(*shapes))):
             raise _err(source, f"{key}.params", f"invalid parameter values for {name}: {pvals}")
-        support = None
-        if "support" in t:
-            s = t["support"]
-            if not (isinstance(s, list) and len(s) == 2):
-                raise _err(source, f"{key}.support", f"must be [a, b], got {_short(s)}")
-            a = _number(s[0], source, f"{key}.support[0]")
-            b = _number(s[1], source, f"{key}.support[1]")
-            if not a < b:
-                raise _err(source, f"{key}.support", f"needs a < b (a positive width), got [{a}, {b}]")
-            support = (a, b)
-        _check_underflow(decay, repeat, scale if support is None else b - a, source, key)
+        support = _support(t, source, key)
+        width = scale if support is None else support[1] - support[0]
+        _check_underflow(decay, repeat, width, source, key)
         for r in range(repeat):
             f = decay**r
             try:
@@ -214,6 +206,20 @@ def _coordinates(tables, source, where) -> list[Measure]:
             except InvalidInput as exc:
                 raise _err(source, key, str(exc)) from None
     return out
+
+
+def _support(t, source, key) -> tuple | None:
+    """The coordinate's ``support = [a, b]`` (None when absent), checked: ``a < b``."""
+    if "support" not in t:
+        return None
+    s = t["support"]
+    if not (isinstance(s, list) and len(s) == 2):
+        raise _err(source, f"{key}.support", f"must be [a, b], got {_short(s)}")
+    a = _number(s[0], source, f"{key}.support[0]")
+    b = _number(s[1], source, f"{key}.support[1]")
+    if not a < b:
+        raise _err(source, f"{key}.support", f"needs a < b (a positive width), got [{a}, {b}]")
+    return (a, b)
 
 
 def _check_underflow(decay: float, repeat: int, width: float, source: str, key: str) -> None:

@@ -45,30 +45,28 @@ def gather_pairs(items, S, start, count, nbr, r2, oi, oj, oq):  # pragma: no cov
         s0 = start[cell]
         e0 = s0 + count[cell]
         for i in range(s0 + a0, s0 + a1):
-            for j in range(i + 1, e0):
-                q = 0.0
-                for l in range(k):
-                    t = S[i, l] - S[j, l]
-                    q += t * t
-                if q < r2:
-                    oi[m] = i
-                    oj[m] = j
-                    oq[m] = q
-                    m += 1
+            m = _gather_row(S, i, i + 1, e0, k, r2, oi, oj, oq, m)
             for h in range(nh):
                 b = nbr[cell, h]
-                if b < 0:
-                    continue
-                for j in range(start[b], start[b] + count[b]):
-                    q = 0.0
-                    for l in range(k):
-                        t = S[i, l] - S[j, l]
-                        q += t * t
-                    if q < r2:
-                        oi[m] = i
-                        oj[m] = j
-                        oq[m] = q
-                        m += 1
+                if b >= 0:
+                    m = _gather_row(S, i, start[b], start[b] + count[b], k, r2, oi, oj, oq, m)
+    return m
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy",
+      inline="always")
+def _gather_row(S, i, j0, j1, k, r2, oi, oj, oq, m):  # pragma: no cover - compiled
+    """The pairs ``(i, j)``, ``j0 ≤ j < j1``, within ``r2``, appended from slot ``m``."""
+    for j in range(j0, j1):
+        q = 0.0
+        for l in range(k):
+            t = S[i, l] - S[j, l]
+            q += t * t
+        if q < r2:
+            oi[m] = i
+            oj[m] = j
+            oq[m] = q
+            m += 1
     return m
 
 
