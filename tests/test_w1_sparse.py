@@ -98,6 +98,32 @@ def test_tree_ctransform_equals_its_numpy_twin(d):
     np.testing.assert_allclose(fb, f_ref, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("d", [2, 4])
+@pytest.mark.parametrize("m", [1, 3])
+def test_tree_ctransform_violators_equal_their_numpy_twin(d, m):
+    """The violators of column generation: the ``m`` smallest values below ``thr[i]`` (the
+    same values as brute force, in any row order), and the minimum still exact."""
+    rng = np.random.default_rng(10 * d + m)
+    X, Y = rng.normal(size=(500, d)), rng.normal(size=(600, d))
+    v = rng.normal(size=600) * 0.5
+    thr = np.median(ctransform_numpy(X, Y, v)[0]) + 0.2 * rng.normal(size=500)
+    f_ref, _, c_ref = ctransform_numpy(X, Y, v, thr=thr, m=m)
+    start = rng.integers(0, 600, size=500)
+    best = np.sqrt(((X - Y[start]) ** 2).sum(axis=1)) - v[start]
+    rows = rng.permutation(500)
+    for tree in (CTree(Y), None):
+        f, j, cand = ctransform(X, Y, v, best, start, tree, thr=thr, m=m, rows=rows)
+        np.testing.assert_allclose(f, f_ref, rtol=1e-12, atol=1e-15)
+        assert ((cand >= 0) == (c_ref >= 0)).all()          # as many violators per row
+        got = np.where(cand >= 0, np.sqrt(((X[:, None] - Y[np.maximum(cand, 0)]) ** 2)
+                                          .sum(axis=2)) - v[np.maximum(cand, 0)], np.inf)
+        ref = np.where(c_ref >= 0, np.sqrt(((X[:, None] - Y[np.maximum(c_ref, 0)]) ** 2)
+                                           .sum(axis=2)) - v[np.maximum(c_ref, 0)], np.inf)
+        np.testing.assert_allclose(np.sort(got, axis=1), np.sort(ref, axis=1), rtol=1e-12)
+        assert (np.where(cand >= 0, got, -np.inf) < thr[:, None]).all()
+    assert (c_ref >= 0).any() and (c_ref < 0).any()          # both kinds of rows occur
+
+
 def test_blas_ctransform_far_from_the_origin_keeps_its_digits():
     rng = np.random.default_rng(3)
     X = 1e6 + rng.normal(size=(300, 20)) * 1e-3

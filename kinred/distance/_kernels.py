@@ -2,9 +2,10 @@ r"""Private numba kernel of :mod:`kinred.distance`: the exact c-transform by bra
 
 Only this module of :mod:`kinred.distance` imports numba; the kernel uses ``cache=True``.
 
-``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1,
-max_leaves, open_rows)``
-    For every row ``xᵢ`` of ``X[r0:r1]`` the exact c-transform
+``ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, rows, r0,
+r1, max_leaves, open_rows, thr, cand)``
+    For every row ``xᵢ``, ``i`` in ``rows[r0:r1]`` (rows taken in that order: neighbours in
+    space one after the other keep the tree's leaves in cache), the exact c-transform
 
     .. math:: f(x_i) = \min_j \bigl(|x_i - y_j| - v_j\bigr)
 
@@ -20,6 +21,10 @@ max_leaves, open_rows)``
     A row that would visit more than ``max_leaves`` leaves stops there: its ``best`` becomes
     the smallest bound of the nodes still open (a certified *lower* bound of its minimum, not
     attained), ``open_rows[i] = 1``, and ``jbest`` the best column found.
+    **Violators**: ``cand[i]`` (``m`` columns) receives the ``m`` columns of smallest value
+    among those with ``|xᵢ − yⱼ| − vⱼ < thr[i]`` (``-1`` where fewer were found): the
+    search then prunes at the ``m``-th smallest of them instead of the minimum (column
+    generation adds them all in one round; with ``thr = −inf`` it is the plain minimum).
     Distances of leaf rows are computed from the coordinate differences,
     ``sqrt(Σₖ (xₖ − yₖ)²)``, in the order of :func:`scipy.spatial.distance.cdist`. The GIL is
     released (``nogil``): disjoint row ranges run in the threads of
@@ -49,33 +54,67 @@ def _box_bound(x, lo, hi, node):
     return np.sqrt(s)
 
 
+@njit(cache=True)
+def _insert(vals, idx, val, j):
+    """Insert ``(val, j)`` into the ascending list ``vals``/``idx`` (a ``j`` already listed is
+    not listed twice); the largest entry falls off."""
+    m = vals.shape[0]
+    q = m - 1
+    for p in range(m):
+        if idx[p] == j:
+            if not val < vals[p]:
+                return
+            q = p                              # the same column, a smaller value: move it up
+            break
+    if not val < vals[q]:
+        return
+    while q > 0 and val < vals[q - 1]:
+        vals[q] = vals[q - 1]
+        idx[q] = idx[q - 1]
+        q -= 1
+    vals[q] = val
+    idx[q] = j
+
+
 @njit(cache=True, nogil=True)
-def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, r0, r1,
-                    max_leaves, open_rows):
+def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, slack, rows, r0,
+                    r1, max_leaves, open_rows, thr, cand):
     d = X.shape[1]
     n_nodes = lo.shape[0]
+    m = cand.shape[1]
     stack = np.empty(256, np.int64)
-    for i in range(r0, r1):
+    vals = np.empty(m)
+    idx = np.empty(m, np.int64)
+    for r in range(r0, r1):
+        i = rows[r]
         x = X[i]
-        b = best[i]
-        jb = jbest[i]
+        vals[:] = np.inf
+        idx[:] = -1
+        vals[0] = best[i]
+        idx[0] = jbest[i]
+        t_i = thr[i]
         top = 1
         stack[0] = 0
         leaves = 0
         while top > 0:
+            # prune at the best value, or while collecting violators below thr[i], at the
+            # m-th smallest of them
+            cut = vals[m - 1] if vals[m - 1] < t_i else t_i
+            if cut < vals[0]:
+                cut = vals[0]
             if leaves >= max_leaves:          # stop: the frontier's bounds bound the minimum
-                lower = b
+                lower = vals[0]
                 for q in range(top):
                     lb = _box_bound(x, lo, hi, stack[q]) - vmax[stack[q]] - slack
                     if lb < lower:
                         lower = lb
-                if lower < b:
-                    b = lower
+                if lower < vals[0]:
+                    vals[0] = lower
                     open_rows[i] = 1
                 break
             top -= 1
             node = stack[top]
-            if _box_bound(x, lo, hi, node) - vmax[node] - slack >= b:
+            if _box_bound(x, lo, hi, node) - vmax[node] - slack >= cut:
                 continue
             if node >= first_leaf:
                 leaves += 1
@@ -86,9 +125,8 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
                         t = x[k] - Ys[j, k]
                         s += t * t
                     val = np.sqrt(s) - vs[j]
-                    if val < b:
-                        b = val
-                        jb = j
+                    if val < vals[0] or (val < t_i and val < vals[m - 1]):
+                        _insert(vals, idx, val, j)
                 continue
             c1 = 2 * node + 1
             c2 = c1 + 1
@@ -105,12 +143,17 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
                 stack[top] = c1
                 stack[top + 1] = c2
             top += 2
-        best[i] = b
-        jbest[i] = jb
+        best[i] = vals[0]
+        jbest[i] = idx[0]
+        for q in range(m):
+            cand[i, q] = idx[q] if vals[q] < t_i else -1
 
 
-def ctransform_numpy(X: np.ndarray, Y: np.ndarray, v: np.ndarray, block: int = 1024):
-    """``minⱼ (|xᵢ − yⱼ| − vⱼ)`` and a minimizer for every row, by brute force (``cdist``).
+def ctransform_numpy(X: np.ndarray, Y: np.ndarray, v: np.ndarray, block: int = 1024,
+                     thr: np.ndarray | None = None, m: int = 1):
+    """``minⱼ (|xᵢ − yⱼ| − vⱼ)`` and a minimizer for every row, by brute force (``cdist``);
+    with ``thr``, also the ``(N, m)`` violators of :func:`ctransform_tree` (the ``m`` columns
+    of smallest value below ``thr[i]``, ``-1`` padded).
 
     The plain-numpy twin of :func:`ctransform_tree` (and the reference of the tests).
     """
@@ -118,8 +161,13 @@ def ctransform_numpy(X: np.ndarray, Y: np.ndarray, v: np.ndarray, block: int = 1
 
     f = np.empty(X.shape[0])
     j = np.empty(X.shape[0], np.int64)
+    cand = np.full((X.shape[0], m), -1, np.int64)
     for s in range(0, X.shape[0], block):
         G = cdist(X[s:s + block], Y) - v[None, :]
         j[s:s + block] = np.argmin(G, axis=1)
         f[s:s + block] = G[np.arange(G.shape[0]), j[s:s + block]]
-    return f, j
+        if thr is not None:
+            order = np.argsort(G, axis=1, kind="stable")[:, :m]
+            below = np.take_along_axis(G, order, axis=1) < thr[s:s + block, None]
+            cand[s:s + block] = np.where(below, order, -1)
+    return (f, j) if thr is None else (f, j, cand)

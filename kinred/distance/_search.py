@@ -99,7 +99,8 @@ class CTree:
 
 def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
                jbest: np.ndarray, tree: CTree | None = None, block: int = 512,
-               deadline: float | None = None, open_rows: np.ndarray | None = None):
+               deadline: float | None = None, open_rows: np.ndarray | None = None,
+               thr: np.ndarray | None = None, m: int = 1, rows: np.ndarray | None = None):
     """Exact ``f(xᵢ) = minⱼ (|xᵢ − yⱼ| − vⱼ)`` over all ``j`` and a minimizer ``jᵢ``.
 
     ``best``/``jbest`` are an attained value and its column for every row (from the candidate
@@ -107,36 +108,44 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
     branch and bound; without it, blocked BLAS. Past ``deadline`` (``time.perf_counter``)
     the tree search visits at most :data:`LEAVES_PAST_DEADLINE` leaves per row, and a row it
     cuts short gets a certified lower bound of its minimum (``open_rows[i] = 1``); the BLAS
-    search raises :class:`OutOfTime` between blocks.
+    search raises :class:`OutOfTime` between blocks. With ``thr`` it also returns the
+    ``(N, m)`` *violators*: up to ``m`` columns of smallest value below ``thr[i]`` (``-1``
+    padded; the BLAS path takes them among the ``m`` smallest of its approximate values).
+    ``rows`` is the order in which the tree search takes the rows (e.g. a
+    :class:`CTree`'s ``order`` of ``X``: neighbours one after the other).
     """
-    if tree is not None:
-        from ._kernels import ctransform_tree
+    want = thr is not None
+    thr = np.full(X.shape[0], -np.inf) if thr is None else np.asarray(thr, np.float64)
+    if tree is None:
+        f, jb, cand = _ctransform_blas(X, Y, v, best, jbest, block, deadline, thr, m)
+        return (f, jb, cand) if want else (f, jb)
+    from .._parallel import get_num_threads, run_parallel
+    from ._kernels import ctransform_tree
 
-        f = np.array(best, dtype=np.float64)
-        inv = np.empty_like(tree.order)
-        inv[tree.order] = np.arange(tree.order.size)
-        jp = inv[jbest].astype(np.int64)
-        vs = np.ascontiguousarray(v[tree.order])
-        vmax = tree.node_vmax(v)
-        scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(X))) + float(np.max(np.abs(v)))
-        from .._parallel import get_num_threads, run_parallel
-
-        X = np.ascontiguousarray(X)
-        slack = 16 * _EPS * scale
-        if open_rows is None:
-            open_rows = np.zeros(X.shape[0], np.int8)
-        chunk = 1 << 14
-        for s in range(0, X.shape[0], chunk):
-            late = deadline is not None and time.perf_counter() > deadline
-            cap = LEAVES_PAST_DEADLINE if late else 1 << 62
-            e = min(s + chunk, X.shape[0])
-            cuts = np.linspace(s, e, get_num_threads() + 1).astype(np.int64)
-            run_parallel(lambda g, r: ctransform_tree(X, tree.Ys, vs, tree.lo, tree.hi, vmax,
-                                                      tree.first_leaf, tree.starts, f, jp, slack,
-                                                      r[0], r[1], cap, open_rows),
-                         [(int(cuts[i]), int(cuts[i + 1])) for i in range(cuts.size - 1)])
-        return f, tree.order[jp]
-    return _ctransform_blas(X, Y, v, best, jbest, block, deadline)
+    f = np.array(best, dtype=np.float64)
+    inv = np.empty_like(tree.order)
+    inv[tree.order] = np.arange(tree.order.size)
+    jp = inv[jbest].astype(np.int64)
+    vs = np.ascontiguousarray(v[tree.order])
+    vmax = tree.node_vmax(v)
+    scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(X))) + float(np.max(np.abs(v)))
+    X = np.ascontiguousarray(X)
+    slack = 16 * _EPS * scale
+    open_rows = np.zeros(X.shape[0], np.int8) if open_rows is None else open_rows
+    rows = np.arange(X.shape[0], dtype=np.int64) if rows is None else rows.astype(np.int64)
+    cand = np.empty((X.shape[0], m), np.int64)
+    chunk = 1 << 14
+    for s in range(0, X.shape[0], chunk):
+        late = deadline is not None and time.perf_counter() > deadline
+        cap = LEAVES_PAST_DEADLINE if late else 1 << 62
+        e = min(s + chunk, X.shape[0])
+        cuts = np.linspace(s, e, get_num_threads() + 1).astype(np.int64)
+        run_parallel(lambda g, r: ctransform_tree(X, tree.Ys, vs, tree.lo, tree.hi, vmax,
+                                                  tree.first_leaf, tree.starts, f, jp, slack,
+                                                  rows, r[0], r[1], cap, open_rows, thr, cand),
+                     [(int(cuts[i]), int(cuts[i + 1])) for i in range(cuts.size - 1)])
+    cand = np.where(cand >= 0, tree.order[np.maximum(cand, 0)], -1)
+    return (f, tree.order[jp], cand) if want else (f, tree.order[jp])
 
 
 def _check(deadline):
@@ -150,13 +159,16 @@ def _centred(X: np.ndarray, Y: np.ndarray):
     return Xc, Yc, np.einsum("ij,ij->i", Xc, Xc), np.einsum("ij,ij->i", Yc, Yc)
 
 
-def _ctransform_blas(X, Y, v, best, jbest, block, deadline=None):
+def _ctransform_blas(X, Y, v, best, jbest, block, deadline, thr, m):
     """Blocked ``|x|² + |y|² − 2x·y`` (centred), then the exact values of every column within
-    twice the distance error of the row's minimum (so the minimum over them is exact)."""
+    twice the distance error of the row's minimum (so the minimum over them is exact); the
+    violators among the ``m`` smallest approximate values."""
     d = X.shape[1]
     Xc, Yc, x2, y2 = _centred(X, Y)
     f = np.array(best, dtype=np.float64)
     jb = np.array(jbest, dtype=np.int64)
+    cand = np.full((X.shape[0], m), -1, np.int64)
+    m = min(m, Y.shape[0])
     for s in range(0, X.shape[0], block):
         if s % (64 * block) == 0:
             _check(deadline)
@@ -168,6 +180,13 @@ def _ctransform_blas(X, Y, v, best, jbest, block, deadline=None):
         np.maximum(D2, 0.0, out=D2)
         G = np.sqrt(D2, out=D2)
         G -= v[None, :]
+        if np.isfinite(thr[s:e]).any():
+            top = np.argpartition(G, m - 1, axis=1)[:, :m] if m < G.shape[1] else \
+                np.broadcast_to(np.arange(m), (e - s, m))
+            ii = np.repeat(np.arange(e - s), m)
+            exact = np.sqrt(np.sum((X[s + ii] - Y[top.ravel()]) ** 2, axis=1)) - v[top.ravel()]
+            below = exact.reshape(e - s, m) < thr[s:e, None]
+            cand[s:e, :m] = np.where(below, top, -1)
         upper = np.minimum(G.min(axis=1) + r, f[s:e])
         ii, jj = np.nonzero(G <= (upper + r)[:, None])
         vals = np.sqrt(np.sum((X[s + ii] - Y[jj]) ** 2, axis=1)) - v[jj]
@@ -178,7 +197,7 @@ def _ctransform_blas(X, Y, v, best, jbest, block, deadline=None):
         better = vv < f[rows]
         f[rows[better]] = vv[better]
         jb[rows[better]] = cols[better]
-    return f, jb
+    return f, jb, cand
 
 
 def knn(X: np.ndarray, Y: np.ndarray, k: int, block: int = 512) -> np.ndarray:
