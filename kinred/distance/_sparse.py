@@ -18,7 +18,8 @@ cost ``c(x, y) = |x − y|``):
    program (equivalently Kantorovich–Rubinstein: ``f`` is 1-Lipschitz)
    ``L = Σ aᵢ fᵢ + Σ bⱼ gⱼ`` is a **lower bound** of W1, whatever ``v`` was.
 4. **Column generation**: the pairs where the dual constraint ``uᵢ + vⱼ ≤ |xᵢ − yⱼ|`` fails
-   (the minimizers of the c-transforms) join ``E`` and the problem is solved again, until
+   (up to :data:`VIOLATORS_PER_ROW` per atom, those of smallest reduced cost, collected by the
+   certificate's searches) join ``E`` and the problem is solved again, until
    ``U − L`` is at the round-off of the values -- the value is then exact *and proved* -- or
    a budget (iterations, edges, seconds) is spent: the certified bracket ``[L, U]`` is
    returned with the reason.
