@@ -48,11 +48,13 @@ class PairTerm:
     name : str
         ``repr`` of the effect (for messages).
     kind : int
-        Compiled kernel kind (0: none, numpy pass only).
+        Compiled kernel kind, from the kernel's ``certificate_form()`` (0: none, numpy pass
+        only).
     params : tuple of float
         Parameters of the compiled kernel.
     nonneg : bool
-        ``φ >= 0`` everywhere (Cucker–Smale, Quadratic with ``c >= 0``).
+        ``φ >= 0`` everywhere, as the kernel's ``is_nonnegative()`` declares (Cucker–Smale,
+        Quadratic with ``c >= 0``).
     """
 
     kernel: object

@@ -229,8 +229,8 @@ def energy_term(effect, *, frame: str, target: str, dim: int) -> EnergyTerm | No
 
 
 def step_radius(effect, v) -> StepRadius | None:
-    """The effect's :class:`StepRadius` at velocities ``v (N, d)`` (``effect.step_radius(v)``),
-    or None."""
+    """The effect's :class:`StepRadius` at velocities ``v (N, d)`` (None in first-order
+    scenes) (``effect.step_radius(v)``), or None."""
     out = _ask(effect, "step_radius", "a StepRadius", v)
     if out is None:
         return None
