@@ -10,7 +10,8 @@ r"""The paper's a-priori bounds for the projected Euler scheme, with their const
   ``L, L′, L″`` are the constants (1.2)–(1.4) of the effects
   (:func:`kinred.kinetic._bounds.effect_constants`, with ``S = Σⱼ cⱼ = κ``);
 * Theorem 2.3 (eq. (2.18)), the least-squares bound for
-  Cucker–Smale only (``paper_bound``; NaN for any other scene):
+  Cucker–Smale only (one alignment in positions whose kernel declares the ``"cucker_smale"``
+  ``certificate_form()``; ``paper_bound``; NaN for any other scene):
 
   .. math:: \sqrt{\mathcal E_x^2 + \mathcal E_v^2} \le \varepsilon(1+\varepsilon)\, h n\,
             \kappa\|g\|_{\rm Lip} V X \exp(h n \|\mathcal A\|), \quad
@@ -33,9 +34,9 @@ import math
 
 import numpy as np
 
-from ..dynamics import CuckerSmale
 from ..kinetic._bounds import effect_constants
 from ._aggregates import _geometry, _sqdist
+from ._plan import KIND_CS
 from ..pairsum.dense import strips as _strips
 
 __all__ = ["PaperTracker", "pair_ratio_extremes"]
@@ -90,7 +91,7 @@ class PaperTracker:
         eff = scene.effects
         self.cs = None
         if (len(eff) == 1 and getattr(eff[0], "pairwise", False)
-                and type(eff[0].kernel) is CuckerSmale and eff[0].source == "x"
+                and plan.terms[0].kind == KIND_CS and eff[0].source == "x"
                 and eff[0].carrier == "v"):
             self.cs = eff[0].kernel
         self.rows = []

@@ -3,10 +3,15 @@
 A second-order, deterministic scene is split into
 
 * pairwise terms ``vᵢ' += Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (:class:`PairTerm`): source ``s`` and
-  carrier ``z`` in ``{x, v}``, kernel ``φ`` with a ``slope_bound(lo, hi)``;
-* one self-propulsion ``(a − b|vᵢ|²)vᵢ`` (the sum of all :class:`~kinred.dynamics.SelfPropulsion`
-  effects, whose coefficients add);
-* constant drifts (:class:`~kinred.dynamics.Drift`), which cancel in the error.
+  carrier ``z`` in ``{x, v}``, kernel ``φ`` with a ``slope_bound(lo, hi)``; a kernel whose
+  ``certificate_form()`` declares one of the closed forms of
+  :data:`kinred.dynamics.hooks.KERNEL_FORMS` runs in the compiled pass, any other in the
+  numpy pass;
+* one self-propulsion ``(a − b|vᵢ|²)vᵢ`` (the sum of all effects whose ``certificate_form()``
+  is ``"self_propulsion"``, e.g. :class:`~kinred.dynamics.SelfPropulsion`, whose coefficients
+  add);
+* constant drifts (``certificate_form()`` ``"drift"``, e.g. :class:`~kinred.dynamics.Drift`),
+  which cancel in the error.
 
 Everything else is refused before any work, with the effect named: noise (the certificate is
 for deterministic dynamics), :class:`~kinred.dynamics.Field` and any other effect outside the
@@ -20,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import CuckerSmale, Drift, Morse, Quadratic, Scene, SelfPropulsion
+from ..dynamics import Scene
+from ..dynamics import hooks as _hooks
 from ..errors import InvalidInput, NotProjectable
 from ..pairsum import is_exact
 
@@ -42,11 +48,13 @@ class PairTerm:
     name : str
         ``repr`` of the effect (for messages).
     kind : int
-        Compiled kernel kind (0: none, numpy pass only).
+        Compiled kernel kind, from the kernel's ``certificate_form()`` (0: none, numpy pass
+        only).
     params : tuple of float
         Parameters of the compiled kernel.
     nonneg : bool
-        ``φ >= 0`` everywhere (Cucker–Smale, Quadratic with ``c >= 0``).
+        ``φ >= 0`` everywhere, as the kernel's ``is_nonnegative()`` declares (Cucker–Smale,
+        Quadratic with ``c >= 0``).
     """
 
     kernel: object
@@ -80,15 +88,17 @@ class Plan:
 
 
 def _compiled(kernel) -> tuple[int, tuple, bool]:
-    """``(kind, params, nonneg)`` of a built-in kernel (kind 0: the numpy pass evaluates it)."""
-    if type(kernel) is CuckerSmale:
-        return KIND_CS, (kernel.G, kernel.beta), True
-    if type(kernel) is Morse:
-        return (KIND_MORSE, (kernel.Ca / kernel.la, kernel.la, kernel.Cr / kernel.lr, kernel.lr,
-                             kernel.soft), False)
-    if type(kernel) is Quadratic:
-        return KIND_QUAD, (kernel.c,), kernel.c >= 0.0
-    return 0, (), False
+    """``(kind, params, nonneg)`` from the kernel's hooks (kind 0: the numpy pass evaluates it)."""
+    nonneg = _hooks.is_nonnegative(kernel) is True
+    form = _hooks.certificate_form(kernel, _hooks.KERNEL_FORMS)
+    if form is None:
+        return 0, (), nonneg
+    if form.kind == "cucker_smale":
+        return KIND_CS, form.params, nonneg
+    if form.kind == "morse":
+        Ca, la, Cr, lr, soft = form.params
+        return KIND_MORSE, (Ca / la, la, Cr / lr, lr, soft), nonneg
+    return KIND_QUAD, form.params, nonneg
 
 
 def _check_slope(e, kernel):
@@ -146,18 +156,21 @@ def make_plan(scene: Scene, n_agents: int) -> Plan:
             _check_slope(e, e.kernel)
             kind, params, nonneg = _compiled(e.kernel)
             terms.append(PairTerm(e.kernel, e.source, e.carrier, repr(e), kind, params, nonneg))
-        elif type(e) is SelfPropulsion:
-            a += e.a
-            b += e.b
+            continue
+        form = _hooks.certificate_form(e, _hooks.EFFECT_FORMS)
+        if form is not None and form.kind == "self_propulsion":
+            a += form.params[0]
+            b += form.params[1]
             has_sp = True
-        elif type(e) is Drift:
+        elif form is not None:
             if scene._tgt(e) != "v":
                 raise InvalidInput(f"{e!r}: drifts on positions are not covered (target 'x')")
         else:
             raise NotProjectable(
                 f"{e!r} is not covered by certificates: they are derived for pairwise effects "
                 "(Alignment, AttractionRepulsion, PairwiseEffect with a kernel that has "
-                "slope_bound), SelfPropulsion and Drift, the members of the paper's class (1.1); "
-                "Field and custom effects have no projected error estimate")
+                "slope_bound), SelfPropulsion and Drift, the members of the paper's class (1.1), "
+                "and effects declaring one of their forms by certificate_form(); Field and "
+                "other custom effects have no projected error estimate")
     kappa = float(n_agents) if scene.normalize == "sum" else 1.0
     return Plan(tuple(terms), a, b, has_sp, kappa)

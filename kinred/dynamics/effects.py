@@ -28,6 +28,11 @@ Subclass :class:`Effect` (or just provide its attributes) and implement ``drift`
 
 or subclass :class:`PairwiseEffect` with any kernel callable ``φ(s)``; no engine change is
 needed (custom kernels without ``value_sq`` are evaluated as ``φ(√q)`` on the blocks).
+The divergence guard, the certificates and the theorem bound know an effect (a kernel) by
+its optional hooks ``energy_term``, ``step_radius``, ``certificate_form``,
+``theorem_constants`` (kernels: ``is_nonnegative``, ``potential_range``,
+``certificate_form``, ``slope_bound``, ``sup_norm``, ``lipschitz``); without them it is
+unknown to them (:mod:`kinred.dynamics.hooks`).
 
 Projection (eq. (2.4)–(2.5); eq. (3.5))
 ---------------------------------------------------------------------------------------------
@@ -47,6 +52,7 @@ import numpy as np
 
 from .._validate import as_array, as_bool, as_choice, as_float
 from ..errors import InvalidInput, NotProjectable
+from .hooks import CertificateForm, EnergyTerm, StepRadius, TheoremConstants
 from .kernels import CuckerSmale, Morse
 
 __all__ = [
@@ -261,6 +267,43 @@ class SelfPropulsion(Effect):
     def project(self, M) -> "SelfPropulsion":
         return self
 
+    def energy_term(self, *, frame, target, dim) -> EnergyTerm | None:
+        """``d/dt Σᵢwᵢ|vᵢ|² ≤ 2 Σᵢwᵢ(a|vᵢ|² − b|vᵢ|⁴)``: ``p = a²/(2b)`` (``b > 0``), ``κ = a``
+        (``b = 0``), nothing for ``a ≤ 0``; absolute frame only (it is not Galilean
+        invariant)."""
+        if frame != "absolute":
+            return None
+        a, b = self.a, self.b
+        if b > 0 and a > 0:
+            return EnergyTerm(p=a * a / (2.0 * b), why=f"self-propulsion adds at most a²/(2b) "
+                                                       f"= {a * a / (2.0 * b):.3g} per unit time")
+        if b == 0 and a > 0:
+            return EnergyTerm(kappa=a, why=f"self-propulsion grows it at most at the rate 2a "
+                                           f"= {2 * a:.3g}")
+        return EnergyTerm()
+
+    def step_radius(self, v) -> StepRadius:
+        """The Jacobian ``(a − b|v|²) I − 2b v vᵀ`` has radius ``max |a − 3b|vᵢ|²|`` (and
+        ``2a`` on the attractor ``|v|² = a/b``)."""
+        q = float(np.max(np.einsum("ij,ij->i", v, v)))
+        r = max(abs(self.a - 3.0 * self.b * q), abs(self.a - self.b * q), 2.0 * abs(self.a))
+        return StepRadius(r, f"self-propulsion max|a − 3b|vᵢ|²| = {r:.3g}, i.e. "
+                             f"dt*b*max|v|^2 must stay below about 2/3")
+
+    def certificate_form(self) -> CertificateForm:
+        """``("self_propulsion", (a, b))``."""
+        return CertificateForm("self_propulsion", (self.a, self.b))
+
+    def theorem_constants(self, *, speed, diam_x=0.0, diam_v=0.0) -> TheoremConstants:
+        """``L′ = |a| + bβ_v²``, ``L″ = 2bβ_v``, ``Λ_z = max(|a|, |a − 3bβ_v²|)``, ``Λ_μ = 0``
+        with ``β_v`` the ``speed`` (§3.3.2)."""
+        a, b = self.a, self.b
+        lz = max(abs(a), abs(a - 3.0 * b * speed ** 2))
+        return TheoremConstants(
+            0.0, abs(a) + b * speed ** 2, 2.0 * b * speed, lz, 0.0, ("speed",),
+            f"a={a:g}, b={b:g}, beta_v={speed:.6g}: L'+=|a|+b beta_v^2, L''+=2b beta_v, "
+            f"Lip=max(|a|,|a-3b beta_v^2|)")
+
     def __repr__(self) -> str:
         return f"SelfPropulsion(a={self.a!r}, b={self.b!r})"
 
@@ -308,6 +351,19 @@ class Noise(Effect):
         xi = rng.standard_normal((n, self.matrix.shape[1]))
         return (self.sigma * np.sqrt(dt)) * (xi @ self.matrix.T)
 
+    def energy_term(self, *, frame, target, dim) -> EnergyTerm | None:
+        """``p = σ² tr(M Mᵀ)`` (``M = I`` unprojected), the expected rate, on velocities."""
+        if target != "v":
+            return None
+        rate = self.sigma * self.sigma * (dim if self.matrix is None
+                                          else float(np.sum(self.matrix ** 2)))
+        return EnergyTerm(p=rate, why=f"noise adds σ²·tr(MMᵀ) = {rate:.3g} per unit time in "
+                                      f"expectation")
+
+    def step_radius(self, v) -> StepRadius:
+        """Nothing: the increments do not depend on the state."""
+        return StepRadius()
+
     def project(self, M) -> "Noise":
         Md = M.to_dense()
         mat = Md if self.matrix is None else Md @ self.matrix
@@ -344,6 +400,28 @@ class Drift(Effect):
 
     def project(self, M) -> "Drift":
         return Drift(M.apply(self.c), target=self.target)
+
+    def energy_term(self, *, frame, target, dim) -> EnergyTerm | None:
+        """Nothing for ``Γ``; ``2Σᵢwᵢvᵢ·c ≤ |c|² + Q`` in the absolute frame (``p = |c|²``,
+        ``κ = ½``); on velocities only."""
+        if target != "v":
+            return None
+        if frame == "centred":
+            return EnergyTerm()
+        return EnergyTerm(p=float(self.c @ self.c), kappa=0.5,
+                          why="a drift c adds at most |c|² + Q per unit time")
+
+    def step_radius(self, v) -> StepRadius:
+        """Nothing: a constant has no Jacobian."""
+        return StepRadius()
+
+    def certificate_form(self) -> CertificateForm:
+        """``("drift", ())``: a constant ``fᵢ`` cancels in the certified error."""
+        return CertificateForm("drift")
+
+    def theorem_constants(self, *, speed=0.0, diam_x=0.0, diam_v=0.0) -> TheoremConstants:
+        """All zero: a constant ``fᵢ``."""
+        return TheoremConstants(0.0, 0.0, 0.0, 0.0, 0.0, (), "constant f_i: all zero")
 
     def __repr__(self) -> str:
         return f"Drift(c=<{self.c.shape[0]}>, target={self.target!r})"

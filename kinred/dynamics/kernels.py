@@ -29,6 +29,10 @@ distances). Built-in kernels also provide
   kernels inside its compiled strip worker (no Python call per strip, no GIL); a scene whose
   pairwise kernels all have one uses it, any other scene a Python strip loop (same operations).
 
+* ``is_nonnegative()``, ``potential_range()``, ``certificate_form()`` – what the divergence
+  guard and the certificates need to know about the kernel (None or absent: unknown); see
+  :mod:`kinred.dynamics.hooks`.
+
 Custom kernels without ``value_sq`` still work: the backends evaluate ``kernel(np.sqrt(q))``.
 
 Sign conventions (eq. (3.14) and eq. (4.3)): a
@@ -46,6 +50,7 @@ import numpy as np
 from .._validate import as_float
 from ..errors import InvalidInput
 from ..pairsum import _kernels
+from .hooks import CertificateForm
 
 __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
 
@@ -135,6 +140,14 @@ class CuckerSmale:
     def __call__(self, s):
         s = np.asarray(s, dtype=float)
         return self.G * np.exp(-self.beta * np.log1p(s * s))
+
+    def is_nonnegative(self) -> bool:
+        """True: ``g ≥ 0`` (alignment with it only dissipates the velocity fluctuation)."""
+        return True
+
+    def certificate_form(self) -> CertificateForm:
+        """``("cucker_smale", (G, β))`` (see :data:`kinred.dynamics.hooks.KERNEL_FORMS`)."""
+        return CertificateForm("cucker_smale", (self.G, self.beta))
 
     def radial_profile(self):
         """The kernel itself: ``G (1 + s²)^(−β)`` is a smooth function of ``s²`` (analytic for
@@ -304,6 +317,15 @@ class Morse:
         a cone ``|r|`` when ``U′(0) = 0``) at coincident agents."""
         return self.__call__ if self.soft > 0 else None
 
+    def potential_range(self) -> float:
+        """``C_a + C_r``: ``U`` (softened or not) takes its values in ``[−C_a, C_r]``."""
+        return self.Ca + self.Cr
+
+    def certificate_form(self) -> CertificateForm:
+        """``("morse", (Ca, la, Cr, lr, soft))`` (see
+        :data:`kinred.dynamics.hooks.KERNEL_FORMS`)."""
+        return CertificateForm("morse", (self.Ca, self.la, self.Cr, self.lr, self.soft))
+
     def pair_form(self):
         """The closed form for the cell list's compiled pass (see
         :func:`kinred.pairsum.pair_form`): ``("morse", (Ca, la, Cr, lr, soft))``."""
@@ -454,6 +476,14 @@ class Quadratic:
     def value_sq(self, q: np.ndarray, out: np.ndarray) -> np.ndarray:
         out[...] = self.c
         return out
+
+    def is_nonnegative(self) -> bool:
+        """``c ≥ 0``."""
+        return self.c >= 0.0
+
+    def certificate_form(self) -> CertificateForm:
+        """``("quadratic", (c,))`` (see :data:`kinred.dynamics.hooks.KERNEL_FORMS`)."""
+        return CertificateForm("quadratic", (self.c,))
 
     def radial_profile(self):
         """The constant itself (one Fourier mode in the NUFFT backend)."""

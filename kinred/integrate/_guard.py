@@ -16,13 +16,16 @@ when no effect depends on absolute velocities, and ``v̄ = 0`` with self-propuls
     Q(t) + \tfrac{p}{2\kappa}
         \le \bigl(Q(s) + \Delta + \tfrac{p}{2\kappa}\bigr)\,e^{2\kappa(t - s)},
 
-where each effect adds to ``(Δ, p, κ)`` (``C = Σⱼ cⱼ``, 1 for ``normalize="mean"``):
+where each effect adds to ``(Δ, p, κ)`` (``C = Σⱼ cⱼ``, 1 for ``normalize="mean"``) what
+it declares through its hooks (:mod:`kinred.dynamics.hooks`: a per-agent effect's
+``energy_term``, a pairwise effect's kernel's ``is_nonnegative`` and ``potential_range``);
+the built-in ones declare:
 
 * alignment ``Σⱼ cⱼ g(‖·‖)(vⱼ − vᵢ)`` with ``g ≥ 0`` (eq. (2.13)):
   ``dQ/dt = −Σᵢⱼ wᵢ cⱼ gᵢⱼ ‖vᵢ − vⱼ‖² ≤ 0`` (``wᵢcⱼ`` is symmetric): nothing;
-* attraction–repulsion with a Morse potential (eq. (3.14)): the
-  kinetic energy ``Q/2`` trades with ``½ Σᵢⱼ wᵢcⱼ U(‖xᵢ − xⱼ‖) ∈ ½C·[−C_a, C_r]``:
-  ``Δ += C (C_a + C_r)``;
+* attraction–repulsion with a bounded potential, e.g. Morse (eq. (3.14)): the
+  kinetic energy ``Q/2`` trades with ``½ Σᵢⱼ wᵢcⱼ U(‖xᵢ − xⱼ‖) ∈ ½C·[inf U, sup U]``
+  (Morse: ``[−C_a, C_r]``): ``Δ += C (sup U − inf U)``;
 * self-propulsion ``(a − b‖v‖²) v``: ``p += a²/(2b)`` (``b > 0``), ``κ += a`` (``b = 0``);
 * a drift ``c``: nothing for ``Γ``; ``2 Σᵢ wᵢ vᵢ·c ≤ |c|² + Q`` otherwise (``p += |c|²``,
   ``κ += ½``);
@@ -34,7 +37,7 @@ above :data:`GROWTH` (10; :data:`GROWTH_NOISE`, 100, with noise) times that boun
 round-off nor truncation error: the explicit step amplifies a mode (for alignment under
 Euler, ``h·ρ(L) > 2`` with ``L`` the weighted graph Laplacian), and ``simulate`` stops with
 :class:`~kinred.errors.SimulationDiverged`. Other scenes (first order, ``Field``, kernels of
-unknown sign) are checked for non-finite states only.
+unknown sign, effects without the hooks) are checked for non-finite states only.
 
 Stable-step hints
 -----------------
@@ -42,8 +45,9 @@ Stable-step hints
 Gershgorin's theorem, in ``O(N²·d)`` once (only when a run stops):
 
 * alignment: ``ρ(L) ≤ 2 maxᵢ Σⱼ cⱼ |gᵢⱼ|`` (the diagonal gives ``ρ(L) ≥ maxᵢ Σⱼ cⱼ gᵢⱼ``);
-* self-propulsion: the Jacobian ``(a − b|v|²) I − 2b v vᵀ`` has radius ``max |a − 3b|vᵢ|²|``
-  (and ``2a`` on the attractor ``|v|² = a/b``);
+* per-agent effects: what their hook ``step_radius(v)`` declares; self-propulsion: the
+  Jacobian ``(a − b|v|²) I − 2b v vᵀ`` has radius ``max |a − 3b|vᵢ|²|`` (and ``2a`` on the
+  attractor ``|v|² = a/b``), drift and noise: none;
 * pair forces ``u(s)(xⱼ − xᵢ)``: the pair Jacobian has norm ``max(|u(s)|, |(s u)′(s)|)``, so
   ``ω̂² = 2 maxᵢ Σⱼ cⱼ ‖Jᵢⱼ‖`` bounds the squared frequency of the oscillations they drive
   (first-order scenes: a relaxation rate).
@@ -61,8 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import observables as _obs
-from ..dynamics import Drift, Noise, SelfPropulsion
-from ..dynamics.kernels import CuckerSmale, Morse, Quadratic
+from ..dynamics import hooks as _hooks
 from ..errors import SimulationDiverged
 from ._tables import RKTable
 
@@ -101,43 +104,51 @@ class Budget:
     why: list = field(default_factory=list)
 
 
-def _nonnegative(kernel) -> bool:
-    return isinstance(kernel, CuckerSmale) or (isinstance(kernel, Quadratic) and kernel.c >= 0)
-
-
 def energy_budget(scene, n: int, dim: int) -> Budget | None:
-    """The budget of ``scene`` for ``n`` agents in ``ℝ^dim`` (``None``: unknown or order 1)."""
+    """The budget of ``scene`` for ``n`` agents in ``ℝ^dim`` (``None``: unknown or order 1).
+
+    Every effect must declare its term (module notes): a pairwise effect through its kernel's
+    hooks (``is_nonnegative()`` for alignment, ``potential_range()`` for a force of positions),
+    any other through ``energy_term`` (:mod:`kinred.dynamics.hooks`). The centred frame (Γ) is
+    used when every effect has a term there, else the absolute one (self-propulsion).
+    """
     if scene.order != 2:
         return None
-    b = Budget(centred=not any(isinstance(e, SelfPropulsion) for e in scene.effects))
     total_c = float(np.sum(scene.coefficients(n)))
+    for frame in _hooks.FRAMES:
+        b = _budget_in(scene, frame, total_c, dim)
+        if b is not None:
+            return b
+    return None
+
+
+def _budget_in(scene, frame: str, total_c: float, dim: int) -> Budget | None:
+    """The budget in ``frame`` (:data:`kinred.dynamics.hooks.FRAMES`), None if an effect has
+    no term there."""
+    b = Budget(centred=frame == "centred")
     for e in scene.effects:
-        if e.pairwise and e.carrier == "v" and scene._tgt(e) == "v" and _nonnegative(e.kernel):
-            b.why.append("alignment with g >= 0 only dissipates it")
-        elif (e.pairwise and e.source == "x" and e.carrier == "x" and scene._tgt(e) == "v"
-              and isinstance(e.kernel, Morse)):
-            dq = total_c * (e.kernel.Ca + e.kernel.Cr)
+        tgt = scene._tgt(e)
+        if getattr(e, "pairwise", False):
+            if e.carrier == "v" and tgt == "v" and _hooks.is_nonnegative(e.kernel):
+                b.why.append("alignment with g >= 0 only dissipates it")
+                continue
+            spread = (_hooks.potential_range(e.kernel)
+                      if e.source == "x" and e.carrier == "x" and tgt == "v" else None)
+            if spread is None:
+                return None
+            dq = total_c * spread
             b.delta += dq
-            b.why.append(f"the Morse potential trades at most Σⱼcⱼ·(Ca + Cr) = {dq:.3g}")
-        elif isinstance(e, SelfPropulsion):
-            if e.b > 0 and e.a > 0:
-                b.p += e.a * e.a / (2.0 * e.b)
-                b.why.append(f"self-propulsion adds at most a²/(2b) = "
-                             f"{e.a * e.a / (2.0 * e.b):.3g} per unit time")
-            elif e.b == 0 and e.a > 0:
-                b.kappa += e.a
-                b.why.append(f"self-propulsion grows it at most at the rate 2a = {2 * e.a:.3g}")
-        elif isinstance(e, Drift) and scene._tgt(e) == "v":
-            if not b.centred:
-                b.p += float(e.c @ e.c)
-                b.kappa += 0.5
-                b.why.append("a drift c adds at most |c|² + Q per unit time")
-        elif isinstance(e, Noise) and scene._tgt(e) == "v":
-            rate = e.sigma * e.sigma * (dim if e.matrix is None else float(np.sum(e.matrix ** 2)))
-            b.p += rate
-            b.why.append(f"noise adds σ²·tr(MMᵀ) = {rate:.3g} per unit time in expectation")
-        else:
+            b.why.append(f"the {type(e.kernel).__name__} potential trades at most "
+                         f"Σⱼcⱼ·(sup U − inf U) = {dq:.3g}")
+            continue
+        term = _hooks.energy_term(e, frame=frame, target=tgt, dim=dim)
+        if term is None:
             return None
+        b.delta += term.delta
+        b.p += term.p
+        b.kappa += term.kappa
+        if term.why:
+            b.why.append(term.why)
     return b
 
 
@@ -329,15 +340,14 @@ def _radii(scene, states):
                     om2 += r
             else:
                 unknown.append(repr(e))
-        elif isinstance(e, SelfPropulsion):
-            v = states[0][2]
-            q = float(np.max(np.einsum("ij,ij->i", v, v)))
-            r = max(abs(e.a - 3.0 * e.b * q), abs(e.a - e.b * q), 2.0 * abs(e.a))
-            rho += r
-            parts.append(f"self-propulsion max|a − 3b|vᵢ|²| = {r:.3g}, i.e. dt*b*max|v|^2 "
-                         f"must stay below about 2/3")
-        elif not isinstance(e, (Drift, Noise)):
-            unknown.append(repr(e))
+        else:
+            r = _hooks.step_radius(e, states[0][2])
+            if r is None:
+                unknown.append(repr(e))
+                continue
+            rho += r.rho
+            if r.why:
+                parts.append(r.why)
     return rho, om2, parts, unknown
 
 

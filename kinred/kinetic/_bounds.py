@@ -66,7 +66,10 @@ The pairwise Lipschitz bound: ``ψ(r, q) = φ(|r|) q`` with ``r`` the source dif
 ``|q| ≤ diam(carrier)``; both the dependence on the particle (Λ_z) and on the measure (Λ_μ,
 through a coupling) have this constant. Self-propulsion ``h(v) = (a − b|v|²)v`` has Jacobian
 eigenvalues ``a − b|v|²`` and ``a − 3b|v|²``. Noise is not covered (the theorems are
-deterministic); kernels without ``sup_norm``/``lipschitz`` give ``inf``.
+deterministic); kernels without ``sup_norm``/``lipschitz`` give ``inf``. A per-agent effect
+declares its row of the table by its hook ``theorem_constants(speed=, diam_x=, diam_v=)``
+(:class:`kinred.dynamics.hooks.TheoremConstants`; SelfPropulsion and Drift do); without it
+its constants are unknown (``inf``).
 """
 
 from __future__ import annotations
@@ -78,6 +81,7 @@ import numpy as np
 
 from .._repr import result_repr
 from .._validate import as_float
+from ..dynamics import hooks as _hooks
 from ..errors import InvalidInput
 
 __all__ = [
@@ -164,14 +168,12 @@ def effect_constants(effect, *, coef_sum: float = 1.0, speed: float = 0.0, diam_
     >>> s.Lp, s.Lpp, s.lip_state                      # 1 + 0.5·4, 2·0.5·2, |1 − 3·0.5·4|
     (3.0, 2.0, 5.0)
     """
-    from ..dynamics import Drift, Noise, SelfPropulsion
-
     S = as_float(coef_sum, "coef_sum", low=0.0)
     speed = as_float(speed, "speed", low=0.0)
     diam_x = as_float(diam_x, "diam_x", low=0.0)
     diam_v = as_float(diam_v, "diam_v", low=0.0)
     name = repr(effect)
-    if getattr(effect, "stochastic", False) or isinstance(effect, Noise):
+    if getattr(effect, "stochastic", False):
         return EffectConstants(name, math.nan, math.nan, math.nan, math.nan, math.nan, (),
                                "noise: not covered by Theorems 3.1/4.3 (deterministic dynamics)")
     if getattr(effect, "pairwise", False):
@@ -186,17 +188,12 @@ def effect_constants(effect, *, coef_sum: float = 1.0, speed: float = 0.0, diam_
             f"phi={effect.kernel!r}: ||phi||inf={sup:.6g}, ||phi||Lip={lip:.6g}, S={S:g}, "
             f"diam({effect.carrier})={diam:.6g}; L'+=2S||phi||inf, L''+=2S||phi||Lip, "
             f"Lip=S(||phi||inf+||phi||Lip*diam)")
-    if isinstance(effect, SelfPropulsion):
-        a, b = effect.a, effect.b
-        lz = max(abs(a), abs(a - 3.0 * b * speed ** 2))
-        return EffectConstants(
-            name, 0.0, abs(a) + b * speed ** 2, 2.0 * b * speed, lz, 0.0, ("speed",),
-            f"a={a:g}, b={b:g}, beta_v={speed:.6g}: L'+=|a|+b beta_v^2, L''+=2b beta_v, "
-            f"Lip=max(|a|,|a-3b beta_v^2|)")
-    if isinstance(effect, Drift):
-        return EffectConstants(name, 0.0, 0.0, 0.0, 0.0, 0.0, (), "constant f_i: all zero")
-    return EffectConstants(name, math.inf, math.inf, math.inf, math.inf, math.inf, (),
-                           "effect outside the documented table: constants unknown (inf)")
+    tc = _hooks.theorem_constants(effect, speed=speed, diam_x=diam_x, diam_v=diam_v)
+    if tc is None:
+        return EffectConstants(name, math.inf, math.inf, math.inf, math.inf, math.inf, (),
+                               "effect outside the documented table: constants unknown (inf)")
+    return EffectConstants(name, tc.L, tc.Lp, tc.Lpp, tc.lip_state, tc.lip_measure,
+                           tuple(tc.sources), tc.formula)
 
 
 def d_estimate(t, eps_jl, alpha, beta, L, Lp, Lpp, norm_M):
@@ -228,9 +225,13 @@ def stability_constant(t, Lambda):
     --------
     >>> stability_constant(0.0, 5.0), round(stability_constant(2.0, 0.5), 12)
     (1.0, 2.718281828459)
+    >>> stability_constant(0.0, float("inf")), stability_constant(1.0, float("inf"))
+    (1.0, inf)
     """
-    with np.errstate(over="ignore"):
-        out = np.exp(np.asarray(Lambda, float) * np.asarray(t, float))
+    t = np.asarray(t, float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.exp(np.asarray(Lambda, float) * t)
+    out = np.where(t == 0.0, 1.0, out)            # C(0) = 1 even for an unknown Λ = inf
     return out if np.ndim(out) else float(out)
 
 
@@ -441,14 +442,15 @@ class _APriori:
 
 def _distance_sources(scene) -> set:
     """The distances the scene's effects depend on: ``"x"``, ``"v"`` (pairwise), ``"speed"``."""
-    from ..dynamics import SelfPropulsion
-
     sources = set()
     for e in scene.effects:
         if getattr(e, "pairwise", False):
             sources.add(e.source)
-        if isinstance(e, SelfPropulsion):
-            sources.add("speed")
+            continue
+        # what an effect depends on does not depend on the measured values
+        tc = _hooks.theorem_constants(e, speed=0.0, diam_x=0.0, diam_v=0.0)
+        if tc is not None:
+            sources.update(tc.sources)
     return sources
 
 
