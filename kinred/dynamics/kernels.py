@@ -45,7 +45,7 @@ import numpy as np
 
 from .._validate import as_float
 from ..errors import InvalidInput
-from ..pairsum import _kernels
+from ..pairsum import strips as _kernels
 
 __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]
 
