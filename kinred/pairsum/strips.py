@@ -57,6 +57,7 @@ SMALL_K = 3
 #: the BLAS products dominate and thin strips would spend their time packing ``Z`` (a
 #: ``(m, k+1)`` operand re-packed for every strip: overhead ≈ 1/(2·rows) of the flops).
 STRIP_ELEMS = 65_536
+#: Dimension from which strips hold twice :data:`STRIP_ELEMS` entries.
 BIG_K = 48
 
 #: Whether compiled passes can run, per stage dtype (numpy's BLAS symbols were found).
