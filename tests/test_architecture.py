@@ -258,3 +258,49 @@ def test_every_package_has_a_row_and_every_row_a_package():
 def test_imports_follow_the_table_of_docs_architecture():
     allowed, base = _table()
     assert violations(_edges(), allowed, base) == []
+
+
+# ---------------------------------------------------------------------------- third-party imports
+#: Import names of libraries the table names otherwise.
+_IMPORT_NAME = {"POT": "ot"}
+
+
+def external_imports():
+    """``(module, top-level name)`` of every import of a library outside kinred."""
+    for mod, (path, _) in _modules().items():
+        for node in _imports(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                if name.split(".")[0] != "kinred":
+                    yield mod, name.split(".")[0]
+
+
+def sole_importers(text: str) -> dict:
+    """``{library import name: package}`` from the rows saying "only package importing X"."""
+    out = {}
+    for line in text.splitlines():
+        m = re.match(r"\|\s*`kinred\.(\w+)`\s*\|([^|]*)\|", line)
+        if m:
+            for lib in re.findall(r"only package importing (\w+)", m.group(2)):
+                out[_IMPORT_NAME.get(lib, lib)] = m.group(1)
+    return out
+
+
+def test_libraries_stay_where_the_table_and_the_house_rules_put_them():
+    """POT only in distance, matplotlib only in report (their rows say so); numba (and
+    llvmlite, its code generator) only in private ``_kernels`` modules."""
+    sole = sole_importers(DOC.read_text(encoding="utf-8"))
+    assert sole == {"ot": "distance", "matplotlib": "report"}
+    bad = []
+    for mod, lib in external_imports():
+        if lib in sole and unit(mod) != sole[lib]:
+            bad.append(f"{mod} imports {lib}, which only kinred.{sole[lib]} may import")
+        last = mod.rsplit(".", 1)[-1]
+        if lib in ("numba", "llvmlite") and not (last.startswith("_") and last.endswith("kernels")):
+            bad.append(f"{mod} imports {lib} outside a private _kernels module")
+    assert bad == []
