@@ -103,6 +103,7 @@ def test_sqdist_twin_and_threshold():
                                   np.zeros((4, 3), np.float32), 0, 2, 4), "share one dtype"),
     (lambda: strips.pair_finish(np.zeros((3, 2)), np.zeros((3, 2)), np.zeros((3, 2))), "A"),
     (lambda: strips.cs_halfint(np.zeros((2, 2)), 1.0, -1, np.zeros((2, 2))), "n2"),
+    (lambda: strips.cs_halfint(np.zeros((2, 2)), "one", 2, np.zeros((2, 2))), "G"),
     (lambda: strips.tau_for(3, np.int64), "dtype"),
 ])
 def test_bad_arguments_are_named(call, name):

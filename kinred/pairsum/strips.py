@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _parallel
-from .._validate import as_int
+from .._validate import as_float, as_int
 from ..errors import InvalidInput
 from . import _kernels
 
@@ -310,7 +310,7 @@ def cs_halfint(Q: np.ndarray, G: float, n2: int, out: np.ndarray) -> np.ndarray:
     _shape("out", _arr(out, "out", 2, writable=True), Q.shape)
     if Q.dtype != out.dtype:
         raise InvalidInput(f"Q and out must share one dtype, got {Q.dtype} and {out.dtype}")
-    return _kernels.cs_halfint(Q, float(G), as_int(n2, "n2", low=0), out)
+    return _kernels.cs_halfint(Q, as_float(G, "G"), as_int(n2, "n2", low=0), out)
 
 
 class CompiledBlocks(NamedTuple):
