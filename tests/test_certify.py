@@ -14,7 +14,8 @@ from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, Cucker
                              Field, Morse, Noise, PairwiseEffect, Quadratic, Scene, SelfPropulsion,
                              project_state)
 from kinred.errors import InvalidInput, KinredError, NotProjectable, SimulationDiverged
-from kinred.integrate import SaveAt, StepState, simulate
+from kinred.integrate import (EULER, ExplicitRK, SaveAt, StepState, VectorField, simulate,
+                              working_frame)
 
 
 def _jl(k, d, seed):
@@ -350,6 +351,34 @@ def test_observer_refuses_other_methods_and_steps():
         CertificateObserver(scene, _jl(2, 3, 2), x0, None)
     with pytest.raises(InvalidInput, match="states"):
         CertificateObserver(scene, _jl(2, 3, 2), x0, v0, states="xv")
+
+
+def test_observer_steps_from_the_times_its_run_reports():
+    """Each projected step starts where the run's previous step ended – the times the run
+    reports, not ``t0 + n·h``: a loop of the public pieces (``working_frame``,
+    ``ExplicitRK(EULER)``) whose times accumulate (``t += h``, 0.6 ≠ 6·0.1) is certified, with
+    the numbers of ``certify``'s own run (the field does not depend on t)."""
+    rng = np.random.default_rng(19)
+    N, d, k, h, n = 12, 5, 2, 0.1, 12
+    x0, v0 = rng.normal(size=(N, d)) + 3.0, rng.normal(size=(N, d))
+    scene = Scene([Alignment(CuckerSmale(1.0, 0.5))])
+    M = _jl(k, d, 3)
+    obs = CertificateObserver(scene, M, x0, v0, paper=False)
+    x, v, shift = working_frame(scene, x0, v0)
+    f, solver = VectorField(scene), ExplicitRK(EULER)
+    ss, t, times = solver.init(f, 0.0, (x, v), h), 0.0, [0.0]
+    obs.init(t, StepState(t, x, v, shift, 0, 0.0), scene)
+    for step in range(1, n + 1):
+        (x, v), _, ss = solver.step(f, t, (x, v), h, ss, None)
+        t += h
+        times.append(t)
+        obs.update(t, StepState(t, x, v, shift, step, h), scene)
+    assert any(s != i * h for i, s in enumerate(times))
+    rec = obs.records()
+    assert rec["t"].tolist() == times
+    c = certify(scene, M, x0, v0, t_span=(0.0, n * h), dt=h, paper=False)
+    for key in ("error", "bound", "error_max", "bound_max", "w1_bound", "roundoff"):
+        assert np.array_equal(getattr(c, key), rec[key])
 
 
 # ---------------------------------------------------------------------------- validity

@@ -42,9 +42,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..pairsum import _kernels as _dyn
 from .. import _parallel
-from ..pairsum.dense import SMALL_K as _SMALL_K, _balance, _pair_products, strips as _strips
+from ..pairsum import strips as _dyn
+from ..pairsum.strips import SMALL_K as _SMALL_K, deal as _balance, pair_products as _pair_products
+from ..pairsum.strips import row_strips as _strips
 from . import _kernels
 
 #: Whether a thread's share of the pass runs as one compiled call (numpy's BLAS symbols found).

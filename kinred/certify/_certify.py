@@ -14,12 +14,12 @@ from .._repr import result_repr, sample_rows, table
 from .._validate import as_choice, as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
-from ..integrate import METHODS, ConstantStep, SaveAt, simulate
-from ..integrate._save import save_grid
+from ..integrate import METHODS, ConstantStep, SaveAt, save_grid, simulate
 from ..projection import as_projection
 from ._observer import CertificateObserver
+from ._plan import make_plan
 
-__all__ = ["Certificate", "certify", "LABELS"]
+__all__ = ["Certificate", "certify", "LABELS", "check_scene"]
 
 #: What every number of a :class:`Certificate` is.
 LABELS = types.MappingProxyType({
@@ -35,6 +35,33 @@ LABELS = types.MappingProxyType({
     "paper_bound": "a-priori bound (paper's constants)",
     "paper_bound_max": "a-priori bound (paper's constants)",
 })
+
+
+def check_scene(scene, n_agents: int) -> None:
+    """Refuse a scene of ``n_agents`` agents that certificates do not cover, before any work
+    (what :func:`certify` and :class:`CertificateObserver` refuse first).
+
+    Raises
+    ------
+    InvalidInput
+        ``scene`` is no :class:`~kinred.dynamics.Scene`, ``n_agents < 1``, a first-order scene,
+        an approximate pair-sum backend (:func:`kinred.pairsum.is_exact`).
+    NotProjectable
+        Noise, :class:`~kinred.dynamics.Field` or another effect outside class (1.1), a kernel
+        without a usable ``slope_bound``.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Alignment, Noise, Scene
+    >>> check_scene(Scene([Alignment()]), 10)
+    >>> check_scene(Scene([Alignment(), Noise(0.1)]), 10)
+    Traceback (most recent call last):
+    ...
+    kinred.errors.NotProjectable: ...
+    """
+    if not isinstance(scene, Scene):
+        raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
+    make_plan(scene, as_int(n_agents, "n_agents", low=1))
 
 
 @dataclass(frozen=True, repr=False)

@@ -66,7 +66,9 @@ import math
 
 from numba import njit
 
-from ..pairsum._kernels import _nb_gemm, pow_row64, sqdist_diff, sqdist_gram_fix
+from ..pairsum.strips import compiled_blocks
+
+_nb_gemm, sqdist_diff, sqdist_gram_fix, pow_row64 = compiled_blocks()
 
 __all__ = ["strip_term", "square_fill", "pass_strips"]
 

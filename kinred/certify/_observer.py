@@ -5,9 +5,10 @@ r"""The per-step machinery of a certificate: an observer of the high-dimensional
 after every accepted step, ``state`` a read-only :class:`~kinred.integrate.StepState` with
 ``.x``, ``.v`` in the integrator's working coordinates – positions relative to
 ``state.shift`` when it is not None – and ``.step``, ``.h``). It steps the projected scene
-alongside (the same floating-point operations as :func:`~kinred.integrate.simulate`'s Euler
-path, so that the projected run is bit-identical to
-``simulate(scene.project(M), *project_state(M, x0, v0))``) and propagates the bounds of
+alongside with :func:`~kinred.integrate.simulate`'s own pieces – its working frame
+(:func:`~kinred.integrate.working_frame`), its Euler solver (``ExplicitRK(EULER)``) and the
+times the run reports – so that the projected run is bit-identical to
+``simulate(scene.project(M), *project_state(M, x0, v0))``, and propagates the bounds of
 ``docs/certificates.md``:
 
 * the defects ``τₓ = PX⁺ − PX − h PV`` and ``τᵥ = PV⁺ − PV − h F′(PX, PV)`` of the projected
@@ -30,11 +31,11 @@ import math
 
 import numpy as np
 
-from .. import observables as _obs
 from .._validate import as_array, as_choice
 from .. import _parallel
 from ..dynamics import Scene
 from ..errors import InvalidInput, SimulationDiverged
+from ..integrate import EULER, ExplicitRK, VectorField, working_frame
 from ..projection import as_projection
 from . import _roundoff as _ro
 from ._aggregates import pair_pass, pair_pass_numpy
@@ -82,6 +83,17 @@ def _segment_min(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
         s = np.where(dd > 0, -np.einsum("ij,ij->i", P, D) / dd, 0.0)
     s = np.clip(s, 0.0, 1.0)
     return _rows(P + s[:, None] * D)
+
+
+class _Field(VectorField):
+    """The projected scene's field, keeping its last evaluation ``(dy, dw)`` (the certificate's
+    round-off allowance needs ``|dw|`` of the step)."""
+
+    last = None
+
+    def __call__(self, t, x, v, rng=None):
+        self.last = super().__call__(t, x, v, rng)
+        return self.last
 
 
 class CertificateObserver:
@@ -184,16 +196,15 @@ class CertificateObserver:
         self.pscene = scene.project(P)
         self.w = scene.agent_weights(n)
         self.c = scene.coefficients(n)
-        self.t0 = float(t0)
+        self.t0 = self.t = float(t0)
         self.h = None
         self.n, self.k = n, P.k
         self.mixed = scene.precision == "mixed"
-        y0, w0 = P.apply(self.x0), P.apply(self.v0)
-        # the projected run, as simulate(pscene, y0, w0) starts it
-        self.shift_y = _obs.centre(y0, self.w) if self.pscene.translation_invariant else None
-        self.Y = y0 - self.shift_y if self.shift_y is not None else y0.copy()
-        self.W = w0.copy()
-        self.tmp = np.empty_like(self.Y)
+        # the projected run, as simulate(pscene, M x0, M v0) starts and steps it
+        self.Y, self.W, self.shift_y = working_frame(self.pscene, P.apply(self.x0),
+                                                     P.apply(self.v0))
+        self.field, self.solver = _Field(self.pscene), ExplicitRK(EULER)
+        self.solver_state = self.solver.init(self.field, self.t0, (self.Y, self.W), None)
         # constant offset between the working frames: e = (Y − PX) + (c_y − M c_x)
         pf = math.sqrt(float(np.sum(P.to_dense() ** 2)))     # ‖M‖_F ≥ ‖ |M| ‖₂
         self.proj_round = _ro.gamma(d) * pf                   # |fl(M z) − M z| ≤ this·|z|
@@ -246,18 +257,20 @@ class CertificateObserver:
         return scene
 
     def _check_step(self, t: float, state) -> float:
-        """The step size, refusing steps out of order or of changing size (fixed-step Euler)."""
+        """The step size, refusing steps out of order, backwards or of changing size
+        (fixed-step Euler); the step starts where the previous one ended (``self.t``)."""
         if state.step != self._step + 1:
             raise InvalidInput(f"observer fed step {state.step} after step {self._step}: every "
                                "accepted step must be observed, in order")
         h = float(state.h)
         if self.h is None:
             self.h = h
-        if h != self.h or t != self.t0 + state.step * h:
+        if h != self.h or not t > self.t:
             raise InvalidInput(
-                f"step {state.step} ends at t={t!r} with size {h!r} after steps of {self.h!r}: "
-                "certificates cover forward Euler with a fixed step only (method='euler', "
-                "docs/certificates.md); adaptive step sizes are not supported")
+                f"step {state.step} ends at t={t!r} with size {h!r} after steps of {self.h!r} "
+                f"ending at t={self.t!r}: certificates cover forward Euler with a fixed step "
+                "only (method='euler', docs/certificates.md); adaptive step sizes are not "
+                "supported")
         return h
 
     # ------------------------------------------------------------------ one step
@@ -265,25 +278,23 @@ class CertificateObserver:
         """Advance by one accepted high-dimensional step (``state`` after it)."""
         self._check_run(state, scene)
         h = self._check_step(t, state)
-        n_prev = state.step - 1
-        tn = self.t0 + n_prev * h
+        tn = self.t                                             # the step's start
         PX, PV, Y, W = self.PX, self.PV, self.Y, self.W
-        dY, dW = self.pscene._rhs(Y, W, tn)                     # the projected step's field
+        # the projected Euler step, by simulate's solver (in place: on copies, the step's
+        # start is needed below)
+        (Yn, Wn), _, self.solver_state = self.solver.step(
+            self.field, tn, (Y.copy(), W.copy()), h, self.solver_state, None)
+        dW = self.field.last[1]                                 # the projected step's field
         aggs, Fd = self._pass(PX, PV, Y, W)
         Fd = self._local_field(Fd, PX, PV, tn)                  # F'(PX, PV): the defect's
         coef = self._coefficients(aggs, PV, W, h)
         pre = self._allowance_inputs(aggs, PX, PV, Y, W, Fd, dW)
-        # the projected Euler step, exactly as simulate's (dY may be W itself: Y first)
-        np.multiply(dY, h, out=self.tmp)
-        Y += self.tmp
-        np.multiply(dW, h, out=self.tmp)
-        W += self.tmp
+        self.Y, self.W, Y, W = Yn, Wn, Yn, Wn
         s = float(np.sum(Y)) + float(np.sum(W))
         if not math.isfinite(s):
             raise SimulationDiverged(
-                f"the projected run diverged at t={self.t0 + state.step * h:.6g} (step "
-                f"{state.step}): its state became non-finite; reduce dt", t=float(t),
-                step=int(state.step))
+                f"the projected run diverged at t={float(t):.6g} (step {state.step}): its "
+                "state became non-finite; reduce dt", t=float(t), step=int(state.step))
         PXn = _project(self.P, state.x)
         PVn = _project(self.P, state.v)
         tau_x = PXn - PX - h * PV
@@ -292,7 +303,7 @@ class CertificateObserver:
                                    PX1=_ro.row_max(PXn), PV1=_ro.row_max(PVn), **pre)
         self._advance(coef, aggs, tau_x, tau_v, alpha, h, self._sizes(Y, W, PXn, PVn))
         self.PX, self.PV = PXn, PVn
-        self._step = state.step
+        self._step, self.t = state.step, float(t)
         if self._saving(state.step):
             self._record(float(t), state)
 

@@ -8,7 +8,7 @@ r"""The paper's a-priori bounds for the projected Euler scheme, with their const
 
   so an agent's error in ``ℝ²ᵏ`` is at most ``√2`` times it (``paper_bound_max``).
   ``L, L′, L″`` are the constants (1.2)–(1.4) of the effects
-  (:func:`kinred.kinetic._bounds.effect_constants`, with ``S = Σⱼ cⱼ = κ``);
+  (:func:`kinred.kinetic.effect_constants`, with ``S = Σⱼ cⱼ = κ``);
 * Theorem 2.3 (eq. (2.18)), the least-squares bound for
   Cucker–Smale only (one alignment in positions whose kernel declares the ``"cucker_smale"``
   ``certificate_form()``; ``paper_bound``; NaN for any other scene):
@@ -34,10 +34,10 @@ import math
 
 import numpy as np
 
-from ..kinetic._bounds import effect_constants
+from ..kinetic import effect_constants
 from ._aggregates import _geometry, _sqdist
 from ._plan import KIND_CS
-from ..pairsum.dense import strips as _strips
+from ..pairsum.strips import row_strips as _strips
 
 __all__ = ["PaperTracker", "pair_ratio_extremes"]
 

@@ -44,7 +44,7 @@ from ..errors import InvalidInput
 from ..io import atomic_write_npz
 from ..measures import Mixture, TensorProduct, load_measure
 from ..quantize import RULE_CONSTANT, Quantization, quantize
-from ..quantize._size import fmt_count, parse_bytes
+from .._validate import fmt_count, parse_bytes
 
 NAME = "quantize"
 HELP = "quantize a measure file (TOML) to atoms with a delayed-curse budget and W1 bounds"

@@ -49,7 +49,7 @@ import numpy as np
 
 from .._validate import as_float
 from ..errors import InvalidInput
-from ..pairsum import _kernels
+from ..pairsum import strips as _kernels
 from .hooks import CertificateForm
 
 __all__ = ["Kernel", "CuckerSmale", "Morse", "Quadratic"]

@@ -55,7 +55,7 @@ class Decision:
 
 def _uncertifiable(cfg, scene, n_atoms: int) -> str:
     """Why the scene cannot be certified ("" if it can)."""
-    from ..certify._plan import make_plan
+    from ..certify import check_scene
     from ..pairsum import is_exact
 
     if cfg.method != "euler":
@@ -65,7 +65,7 @@ def _uncertifiable(cfg, scene, n_atoms: int) -> str:
         return (f"the pair-sum backend {scene.pairsum!r} is approximate; the certificate "
                 "bounds the exact (dense) scheme")
     try:
-        make_plan(scene, n_atoms)
+        check_scene(scene, n_atoms)
     except (NotProjectable, InvalidInput) as exc:
         return f"the scene is not covered by certificates: {exc}"
     return ""

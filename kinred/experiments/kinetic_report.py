@@ -76,7 +76,7 @@ def _w1_panel(ax, result, colors, leg):
 
 def _error_panel(ax, result, colors, measured, cert, what):
     from ..report import fit_log_axis, log_plot
-    from ..report._plots import StyleLegend
+    from ..report import StyleLegend
 
     t = result.t
     sel = _after_start(t)
@@ -98,7 +98,7 @@ def _error_panel(ax, result, colors, measured, cert, what):
 
 
 def _fig_w1(plt, result):
-    from ..report._plots import StyleLegend, k_colors
+    from ..report import StyleLegend, k_colors
 
     colors = k_colors(result.per_k)
     with_err = any(_has(r, "err_rms") or _has(r, "err_max") for r in result.per_k.values())
@@ -120,7 +120,7 @@ def _fig_w1(plt, result):
 
 def _fig_bound(plt, result):
     from ..report import fit_log_axis, log_plot
-    from ..report._plots import StyleLegend, k_colors, note_not_drawn, shade_above
+    from ..report import StyleLegend, k_colors, note_not_drawn, shade_above
 
     t, colors = result.t, k_colors(result.per_k)
     fig, ax = plt.subplots(figsize=(9, 5), layout="constrained")
@@ -165,7 +165,7 @@ def _fig_bound(plt, result):
 
 def _fig_observables(plt, result):
     from ..report import finite_values, fit_log_axis, log_plot
-    from ..report._plots import StyleLegend, k_colors
+    from ..report import StyleLegend, k_colors
 
     cfg, t, colors = result.config, result.t, k_colors(result.per_k)
     mill = shows_milling(cfg)
@@ -230,7 +230,7 @@ def positions_data(result):
 
 
 def _fig_positions(plt, result):
-    from ..report._plots import cloud_bins, k_colors, point_cloud
+    from ..report import cloud_bins, k_colors, point_cloud
 
     cfg, colors = result.config, k_colors(result.per_k)
     orig, w, panels = positions_data(result)

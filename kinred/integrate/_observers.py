@@ -29,9 +29,10 @@ from typing import AbstractSet, Mapping, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
+from .. import observables as _obs
 from ..errors import InvalidInput
 
-__all__ = ["StepState", "Observer", "as_observers", "Progress"]
+__all__ = ["StepState", "Observer", "as_observers", "Progress", "working_frame"]
 
 
 class StepState(NamedTuple):
@@ -83,6 +84,41 @@ class Observer(Protocol):
     """
 
     def __call__(self, t: float, state: StepState, scene) -> None: ...
+
+
+def working_frame(scene, x0: np.ndarray, v0: np.ndarray | None) -> tuple:
+    """``(x, v, shift)``: the working state a run of ``scene`` starts from (fresh arrays).
+
+    For a translation-invariant scene the positions are taken relative to the initial
+    weighted centroid ``shift`` (so that their rounding is relative to the cloud's spread,
+    not to its distance from the origin); otherwise ``shift`` is None and ``x`` a copy of
+    ``x0``. This is the frame of :class:`StepState` and of :func:`~kinred.integrate.simulate`.
+
+    Parameters
+    ----------
+    scene : Scene
+    x0 : (N, d) array_like
+    v0 : (N, d) array_like or None
+        None for first-order scenes.
+
+    Examples
+    --------
+    >>> from kinred.dynamics import Scene, Alignment
+    >>> x, v, shift = working_frame(Scene([Alignment()]), np.array([[1.0], [3.0]]),
+    ...                             np.zeros((2, 1)))
+    >>> x.ravel(), shift
+    (array([-1.,  1.]), array([2.]))
+    """
+    from ..dynamics import Scene
+
+    if not isinstance(scene, Scene):
+        raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
+    x0, v0 = scene._check_state(x0, v0, ("x0", "v0"))
+    w = scene.agent_weights(x0.shape[0])
+    shift = _obs.centre(x0, w) if scene.translation_invariant else None
+    x = x0 - shift if shift is not None else x0.copy()
+    v = v0.copy() if v0 is not None else None
+    return x, v, shift
 
 
 def _readonly(a):

@@ -116,8 +116,14 @@ def observable_list(spec, order: int) -> list:
     return out
 
 
+def _check_save(save) -> None:
+    if not isinstance(save, SaveAt):
+        raise InvalidInput(f"save must be a kinred.integrate.SaveAt, got {_short(save)}")
+
+
 def save_points(save: SaveAt, t0: float, t1: float, dt: float, n_steps: int | None) -> int:
     """An upper bound of the number of save points of a run (nothing is built)."""
+    _check_save(save)
     if save.t is not None:
         return len(save.t) + 2
     every = save.every or 1
@@ -132,10 +138,11 @@ _SAVE_HINT = ("save fewer points (SaveAt(every=...) or fewer times t), fewer sta
 
 def check_save_size(save: SaveAt, n_save: int, shape: tuple, order: int, n_obs: int,
                     call: str, hint: str = _SAVE_HINT) -> None:
-    """:func:`~kinred._validate.check_alloc` of what a run records: the save grid, the
-    observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d`` entries) and
-    the states ``(T, N, d)`` requested by ``save.states`` (none requested: the final state); ``call`` names the run's
-    arguments in the message."""
+    """The memory preflight (``kinred._validate.check_alloc``) of what a run records: the save
+    grid, the observables (scalars counted; ``centre`` and ``mean_velocity`` have ``d``
+    entries) and the states ``(T, N, d)`` requested by ``save.states`` (none requested: the
+    final state); ``call`` names the run's arguments in the message."""
+    _check_save(save)
     n, d = shape
     n_states = int(save.states in (True, "x")) + int(save.states in (True, "v") and order == 2)
     per_point = GRID_POINT_BYTES + n_obs * (OBS_VALUE_BYTES + 16 * d) + 8 * n * d * n_states
@@ -166,6 +173,7 @@ def save_grid(save: SaveAt, t0: float, t1: float, dt: float, n_steps: int | None
     >>> save_grid(SaveAt(every=3), 0.0, 1.0, 0.1, None, "rk45").times
     array([0. , 0.3, 0.6, 0.9, 1. ])
     """
+    _check_save(save)
     if n_steps is not None:
         return _fixed_grid(save, t0, t1, dt, n_steps, method)
     if save.t is not None:

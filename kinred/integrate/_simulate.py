@@ -15,7 +15,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .. import observables as _obs
 from .._repr import brief, result_repr, sample_rows, table
 from .._rng import as_generator
 from .._validate import as_float, as_int, as_span
@@ -23,7 +22,7 @@ from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
-from ._observers import Progress, as_observers, state_view
+from ._observers import Progress, as_observers, state_view, working_frame
 from ._registry import SOLVERS, method_name
 from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
                     save_points)
@@ -370,9 +369,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 
-    shift = _obs.centre(x0, w) if scene.translation_invariant else None
-    x = x0 - shift if shift is not None else x0.copy()
-    v = v0.copy() if v0 is not None else None
+    x, v, shift = working_frame(scene, x0, v0)
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
                             x0, v0, w)

@@ -176,7 +176,7 @@ def _check_trajectory(n: int, d: int, t_span, dt, method, save) -> None:
     """The preflight of the states ``(T, n, d)`` that :func:`solve` saves (as
     :func:`~kinred.integrate.simulate` will check them), before the atoms are built."""
     from ..integrate import SOLVERS
-    from ..integrate._save import check_save_size, save_points
+    from ..integrate import check_save_size, save_points
 
     spec = SOLVERS.get(method) if isinstance(method, str) else None
     t0, t1 = t_span

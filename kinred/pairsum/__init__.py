@@ -26,6 +26,9 @@ A backend declares whether its pair sums are exact (``exact = True``: Dense, Num
 approximate (NUFFT, RandomBatch, CellList, Auto; a backend that does not say is approximate,
 :func:`is_exact`): certificates cover exact backends only.
 
+The exact engine's strip walker (row strips, their threads, distance blocks, products) is
+public in :mod:`kinred.pairsum.strips`, for other passes over all pairs (the certificate's).
+
 A new backend is one file implementing the protocol; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """

@@ -30,6 +30,9 @@ With ``precision="mixed"`` steps 1–3 (Gram blocks, kernel values, products and
 run in float32 (``sgemm``), with close pairs still recomputed from float64 differences; the
 centring before and the combination after them stay in float64.
 
+The strips, their threads, the distance blocks and the products are the strip walker of
+:mod:`kinred.pairsum.strips` (public for other passes over all pairs, the certificate's).
+
 Timings behind these choices (strip sizes, the compiled worker, variants not kept):
 docs/performance.md, section "Pair-sum engine".
 """
@@ -47,19 +50,10 @@ from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _kernels
 from ._base import PairTerms, check_plan_args
+from .strips import BIG_K, SMALL_K, STRIP_ELEMS  # noqa: F401  (the strip walker's constants)
+from .strips import _deal as _balance, _products as _pair_products, _row_strips as strips
 
 __all__ = ["Dense", "DensePlan"]
-
-#: Dimensions up to which distances are computed by differences (numba, vectorized over
-#: columns) rather than by the Gram product plus fix-up.
-SMALL_K = 3
-
-#: Target number of pairwise entries per strip: ≈ 512 kB of float64 for small dimensions (the
-#: block stays in L2 for the elementwise kernel passes) and 2× more from ``BIG_K`` on, where
-#: the BLAS products dominate and thin strips would spend their time packing ``Z`` (a
-#: ``(m, k+1)`` operand re-packed for every strip: overhead ≈ 1/(2·rows) of the flops).
-STRIP_ELEMS = 65_536
-BIG_K = 48
 
 #: Per calling thread: the scratch buffers, reused from step to step (fresh multi-megabyte
 #: arrays every step cost more in page faults than the arithmetic on them).
@@ -96,42 +90,6 @@ def _scratch(sig: tuple, make) -> dict:
             cache.pop(next(iter(cache)))
     cache[sig] = ws        # most recently used last
     return ws
-
-
-def strips(n: int, block: int | None, dim: int = 1, nthreads: int = 1, itemsize: int = 8) -> list:
-    """Row strips ``[(i0, i1)]`` of the upper triangle ``j >= i0``.
-
-    With ``block`` given: fixed ``block`` rows per strip. Otherwise strips of about
-    :data:`STRIP_ELEMS` entries each (2× that for ``dim >= BIG_K``; rows ``i0:i1`` against
-    columns ``i0:n``, at most ``entries/512`` rows), so later strips (shorter rows) get more
-    rows and every strip costs about the same (float32 blocks, ``itemsize = 4``: twice the
-    entries, the same bytes). With ``nthreads > 1`` strips are made small enough that there
-    are at least four per thread (load balance).
-    """
-    if block is not None:
-        return [(i0, min(n, i0 + block)) for i0 in range(0, n, block)]
-    elems = STRIP_ELEMS * (2 if dim >= BIG_K else 1) * 8 // itemsize
-    if nthreads > 1:
-        elems = max(4096, min(elems, (n * (n + 1) // 2) // (4 * nthreads)))
-    out = []
-    i0 = 0
-    while i0 < n:
-        bb = min(elems // 512, max(8, elems // max(n - i0, 1)))
-        i1 = min(n, i0 + bb)
-        out.append((i0, i1))
-        i0 = i1
-    return out
-
-
-def _balance(strip_list: list, n: int, nthreads: int) -> tuple:
-    """Strips dealt to ``nthreads`` groups: largest first to the least-loaded (deterministic)."""
-    groups = [[] for _ in range(nthreads)]
-    loads = [0] * nthreads
-    for i0, i1 in sorted(strip_list, key=lambda st: (-(st[1] - st[0]) * (n - st[0]), st[0])):
-        g = loads.index(min(loads))
-        groups[g].append((i0, i1))
-        loads[g] += (i1 - i0) * (n - i0)
-    return tuple(tuple(sorted(gr)) for gr in groups)
 
 
 @dataclass(frozen=True, eq=False)
@@ -473,14 +431,6 @@ def _loop_share(plan: DensePlan, ws: dict, state: dict, geo: dict, g: int, my_st
     for s in plan.terms.sources:  # once per call: one lock per source, not per strip
         _kernels.count(s, done)
     return acc
-
-
-def _pair_products(phi: np.ndarray, Z: np.ndarray, A: np.ndarray, i0: int, i1: int, n: int):
-    """Rows of the strip, ``A_I += Φ_I,[i0:] Z_[i0:]``; columns beyond it, by symmetry,
-    ``A_[i1:] += Φ_I,[i1:]ᵀ Z_I`` (each unordered pair's φ used twice)."""
-    _parallel.gemm(1.0, phi, Z[i0:], 1.0, A[i0:i1])
-    if i1 < n:
-        _parallel.gemm(1.0, phi[:, i1 - i0:], Z[i0:i1], 1.0, A[i1:], trans_a=True)
 
 
 def _finish(plan: DensePlan, accs: list, centred: dict) -> dict:

@@ -10,7 +10,8 @@ import math
 
 import numpy as np
 
-__all__ = ["k_colors", "StyleLegend", "shade_above", "note_not_drawn", "point_cloud", "cloud_bins"]
+__all__ = ["k_colors", "StyleLegend", "shade_above", "note_not_drawn", "point_cloud", "cloud_bins",
+           "tidy_log_axes"]
 
 #: Colours of the reduced systems, in the order of their k (matplotlib's ``tab10`` without
 #: black and grey, which mark the original system and references).
@@ -161,3 +162,19 @@ def cloud_bins(values, *, count: int | None = None) -> np.ndarray:
     if hi - lo <= 1e-12 * max(1.0, abs(lo)):
         lo, hi = lo - 0.5, hi + 0.5
     return np.linspace(lo, hi, count + 1)
+
+
+def tidy_log_axes(*axes) -> None:
+    """Readable log axes: over less than three decades, ticks at 1, 2 and 5 times the powers
+    of ten labelled plainly (``0.2``, ``0.5``, ``1``); over more, the decades only. Minor
+    ticks stay, unlabelled."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    for ax in axes:
+        for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+            if axis.get_scale() != "log" or min(lim) <= 0:
+                continue
+            if math.log10(max(lim) / min(lim)) < 3:
+                axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            axis.set_minor_formatter(NullFormatter())

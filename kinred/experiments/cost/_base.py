@@ -277,24 +277,6 @@ def label_points(ax, xs, ys, texts, *, color=None, fontsize: int = 7) -> None:
                     fontsize=fontsize, color=color, ha="left" if dx > 0 else "right", va="bottom")
 
 
-def tidy_log_axes(*axes) -> None:
-    """Readable log axes: over less than three decades, ticks at 1, 2 and 5 times the powers
-    of ten labelled plainly (``0.2``, ``0.5``, ``1``); over more, the decades only. Minor
-    ticks stay, unlabelled."""
-    import math
-
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
-    for ax in axes:
-        for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
-            if axis.get_scale() != "log" or min(lim) <= 0:
-                continue
-            if math.log10(max(lim) / min(lim)) < 3:
-                axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-                axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-            axis.set_minor_formatter(NullFormatter())
-
-
 def progress_bar(total: int, enabled: bool):
     """A tqdm bar on stderr (time remaining), disabled unless ``enabled``."""
     from tqdm.auto import tqdm

@@ -11,7 +11,7 @@ from ._registry import REGISTRY
 
 def _tidy(fig):
     """Decade labels only on the log axes of a study's figure (no crowded minor labels)."""
-    from ._base import tidy_log_axes
+    from ...report import tidy_log_axes
 
     tidy_log_axes(*fig.axes)
     return fig

@@ -27,7 +27,8 @@ import numpy as np
 from ..._validate import as_choice, as_int
 from ...observables import above_floor
 from ...projection import KINDS
-from ._base import Study, StudyConfig, clock, draw_front, label_points, tidy_log_axes
+from ...report import tidy_log_axes
+from ._base import Study, StudyConfig, clock, draw_front, label_points
 
 
 @dataclass(frozen=True)
