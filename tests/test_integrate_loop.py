@@ -11,12 +11,26 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import kinred.observables as obs
-from kinred.dynamics import Alignment, CuckerSmale, Drift, Scene, SelfPropulsion
+from kinred.dynamics import (Alignment, CuckerSmale, Drift, Scene, SelfPropulsion,
+                             get_num_threads, set_num_threads)
 from kinred.errors import InvalidInput
 from kinred.integrate import AdaptiveStep, ConstantStep, SaveAt, simulate
 from kinred.integrate import _kernels
 from kinred.integrate._save import FUSED_MIN
 from kinred.pairsum import RandomBatch
+
+
+class num_threads:
+    """The engine's thread count for a ``with`` block."""
+
+    def __init__(self, n):
+        self.n, self.old = n, get_num_threads()
+
+    def __enter__(self):
+        set_num_threads(self.n)
+
+    def __exit__(self, *exc):
+        set_num_threads(self.old)
 
 
 def _rel(a, b):
@@ -62,6 +76,25 @@ def test_moments_kernel_propagates_non_finite_values():
         z[17, 1] = bad
         f, s, t = _kernels.state_moments(z, w)
         assert not np.isfinite(s) and (not np.isfinite(t) or bad == 1e300)
+
+
+def test_split_rows_give_the_twin_whatever_the_threads():
+    n, d = 4100, 256                       # above SPLIT_MIN: two row halves
+    assert n * d >= _kernels.SPLIT_MIN and len(_kernels._halves(n, d)) == 2
+    rng = np.random.default_rng(8)
+    z, w, shift = rng.normal(size=(n, d)) + 7.0, rng.dirichlet(np.ones(n)), rng.normal(size=d)
+    ref = _kernels.moments_numpy(z, w, shift)
+    got = {}
+    for threads in (1, 2):
+        with num_threads(threads):
+            got[threads] = _kernels.state_moments(z, w, shift)
+            x, v, dv = z.copy(), z[::-1].copy(), rng.normal(size=(n, d))
+            x2, v2 = x.copy(), v.copy()
+            _kernels.euler(x, v, v, dv, 0.01)
+            _kernels.euler_numpy(x2, v2, v2, dv, 0.01, np.empty_like(x))
+            assert np.array_equal(x, x2) and np.array_equal(v, v2)
+    assert got[1] == got[2]
+    assert np.allclose(got[1], ref, rtol=1e-12, atol=0)
 
 
 @pytest.mark.parametrize("order", [1, 2])

@@ -12,23 +12,25 @@ Kernels
     ``x ← x + dx·h`` then ``v ← v + dv·h`` in place, element by element (``dx`` may be ``v``
     itself: each element of ``x`` is updated from the old ``v`` before ``v`` changes). No
     fastmath: the product is rounded before the sum, so the result is *bit-identical* to
-    numpy's ``tmp = dx·h; x += tmp`` of forward Euler (eq. (1.6)). Twin:
-    :func:`euler_numpy`.
-``moments(z, w, shift, c, out)``
-    One compiled call for ``out = [F, S, T]`` of ``a = z + shift`` (``z (N, d)``, ``shift
-    (d,)``; each entry rounded as numpy's ``z + shift``, without that array) with probability
-    weights ``w``: the fluctuation ``F = Σᵢ wᵢ‖aᵢ − a_c‖²`` (``Γ`` or ``Λ`` of §3.4.1), the
-    second moment ``S = Σᵢ wᵢ‖aᵢ‖²`` and the plain sum ``T = Σᵢⱼ aᵢⱼ`` (non-finite iff a
-    coordinate is, or the sum overflows: the loop's finiteness test). ``F`` is taken about a
-    reference centre ``c`` as in :mod:`kinred.observables`' compensated centre: one sweep gives
-    ``r = Σ wᵢ(aᵢ − c)`` and ``S₂ = Σ wᵢ‖aᵢ − c‖²``, and ``F = S₂ − 2‖r‖² + W‖r‖²`` (``W =
-    Σ wᵢ``), which is ``Σ wᵢ‖(aᵢ − c) − r‖²`` exactly. When ``c`` is far from the mean
-    (``‖r‖² > RECENTRE·S₂``) a second sweep starts from ``c + r``, which is then the
-    compensated centre of the observables; ``c`` is updated in place to the mean, so that a
-    caller passing it again on the next step (the state moved a little) needs one sweep.
-    Rows are summed in blocks of :data:`BLOCK` (error growth ``O((d + N/BLOCK + BLOCK)·u)``
-    instead of ``O(N·d·u)``). Twin: :func:`moments_numpy` (the formulas of
-    :func:`kinred.observables.gamma`), equal to 1e-12 relative.
+    numpy's ``tmp = dx·h; x += tmp`` of forward Euler (eq. (1.6)); :func:`euler` runs them
+    over two row halves. Twin: :func:`euler_numpy`.
+``sweep(z, w, shift, c, r, acc)``
+    One pass over the rows of ``a = z + shift`` (``z (n, d)``, ``shift (d,)``; each entry
+    rounded as numpy's ``z + shift``, without that array) with weights ``w``:
+    ``r = Σᵢ wᵢ(aᵢ − c)`` and ``acc = [Σᵢ wᵢ‖aᵢ − c‖², Σᵢ wᵢ‖aᵢ‖², Σᵢⱼ aᵢⱼ, Σᵢ wᵢ]``, rows summed
+    in blocks of :data:`BLOCK` (error growth ``O((d + n/BLOCK + BLOCK)·u)``, not ``O(n·d·u)``).
+
+:func:`moments` ``(z, w, shift, c, out)`` joins the sweeps of two row halves into
+``out = [F, S, T]``: the fluctuation ``F = Σᵢ wᵢ‖aᵢ − a_c‖²`` (``Γ`` or ``Λ`` of §3.4.1), the
+second moment ``S = Σᵢ wᵢ‖aᵢ‖²`` and the plain sum ``T`` (non-finite iff a coordinate is, or
+the sum overflows: the loop's finiteness test). ``F`` is taken about the reference centre
+``c`` as :mod:`kinred.observables` takes it about its compensated centre: from one sweep,
+``F = S₂ − 2‖r‖² + W‖r‖²`` (``S₂ = Σ wᵢ‖aᵢ − c‖²``, ``W = Σ wᵢ``), which is
+``Σ wᵢ‖(aᵢ − c) − r‖²`` exactly. When ``c`` is far from the mean (``‖r‖² > RECENTRE·S₂``) a
+second sweep starts from ``c + r``, the compensated centre; ``c`` is updated in place to the
+mean, so that a caller passing it again on the next step (the state moved a little) needs
+one sweep. Twin: :func:`moments_numpy` (the formulas of :func:`kinred.observables.gamma`),
+equal to 1e-12 relative.
 
 Flags: ``cache=True``, ``nogil=True``; no fastmath in the Euler update (numpy's rounding),
 re-association and contraction only in :func:`moments` (vectorized sums; NaN and Inf
@@ -37,11 +39,16 @@ propagate as in IEEE arithmetic).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor, wait
+
 import numpy as np
 from numba import njit
 
-__all__ = ["euler_pair", "euler_one", "moments", "euler_numpy", "moments_numpy", "state_moments",
-           "Moments", "BLOCK", "RECENTRE"]
+from ..dynamics import get_num_threads
+
+__all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
+           "moments_numpy", "state_moments", "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
 #: reductions); NaN and Inf still propagate.
@@ -49,6 +56,13 @@ _FM = {"reassoc", "contract"}
 
 #: Rows per partial sum of :func:`moments`.
 BLOCK = 256
+
+#: From this many entries ``N·d`` on, :func:`moments` and :func:`euler` split the rows in two
+#: halves, the second one in a worker thread when the engine has two threads or more
+#: (:func:`kinred.dynamics.set_num_threads`); the halves are the same with one thread.
+SPLIT_MIN = 2 ** 20
+
+_POOL: list = [None, 0]
 
 #: :func:`moments` sweeps a second time when its reference centre ``c`` is further from the
 #: weighted mean ``m`` than ``‖m − c‖² > RECENTRE·Σ wᵢ‖aᵢ − c‖²``; below it the one sweep is
@@ -73,8 +87,8 @@ def euler_one(x, dx, h):  # pragma: no cover - compiled
             x[i, j] = x[i, j] + dx[i, j] * h
 
 
-@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy", inline="always")
-def _sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
     """One pass: ``r = Σ w (a − c)``, ``acc = [Σ w|a − c|², Σ w|a|², Σ a, Σ w]``, ``a = z + shift``."""
     n, d = z.shape
     blk = np.zeros(d)
@@ -108,30 +122,78 @@ def _sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
                 part[k] = 0.0
 
 
-@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def moments(z, w, shift, c, out):  # pragma: no cover - compiled
-    d = z.shape[1]
-    r = np.zeros(d)
-    acc = np.zeros(4)
-    for j in range(d):
-        if not np.isfinite(c[j]):
-            c[j] = 0.0
-    _sweep(z, w, shift, c, r, acc)
-    rr = 0.0
-    for j in range(d):
-        rr += r[j] * r[j]
-    if not rr <= RECENTRE * acc[0]:         # c is not near the centre: sweep again from it
-        for j in range(d):
-            c[j] += r[j]
-        _sweep(z, w, shift, c, r, acc)
-        rr = 0.0
-        for j in range(d):
-            rr += r[j] * r[j]
-    for j in range(d):
-        c[j] += r[j]
-    out[0] = acc[0] - 2.0 * rr + acc[3] * rr
-    out[1] = acc[1]
-    out[2] = acc[2]
+def _pool() -> ThreadPoolExecutor:
+    """The one worker thread that takes the second half of the rows (made anew in a forked
+    process, where the parent's thread does not exist)."""
+    if _POOL[0] is None or _POOL[1] != os.getpid():
+        _POOL[:] = [ThreadPoolExecutor(max_workers=1, thread_name_prefix="kinred-loop"),
+                    os.getpid()]
+    return _POOL[0]
+
+
+def _halves(n: int, d: int) -> list:
+    """Row ranges of one call: two halves (at a multiple of :data:`BLOCK`) from
+    :data:`SPLIT_MIN` entries on, whatever the thread count (the sums do not depend on it)."""
+    if n * d < SPLIT_MIN or n < 2 * BLOCK:
+        return [(0, n)]
+    mid = (n // 2) // BLOCK * BLOCK
+    return [(0, mid), (mid, n)]
+
+
+def _each(fn, ranges) -> list:
+    """``[fn(i0, i1)]`` over the row ranges: the second one in the worker thread when the
+    engine has two threads or more (the kernels release the GIL)."""
+    if len(ranges) == 1 or get_num_threads() < 2:
+        return [fn(*rg) for rg in ranges]
+    fut = _pool().submit(fn, *ranges[1])
+    try:
+        first = fn(*ranges[0])
+    finally:
+        wait([fut])         # never leave the worker writing into the caller's arrays
+    return [first, fut.result()]
+
+
+def _sweep_all(z, w, shift, c, ranges):
+    """``(r, acc)`` of :func:`sweep` over all rows: the ranges' partial sums, added in order."""
+    def part(i0, i1):
+        r, acc = np.empty(z.shape[1]), np.empty(4)
+        sweep(z[i0:i1], w[i0:i1], shift, c, r, acc)
+        return r, acc
+    parts = _each(part, ranges)
+    r, acc = parts[0]
+    for rp, ap in parts[1:]:
+        r, acc = r + rp, acc + ap
+    return r, acc
+
+
+def moments(z, w, shift, c, out) -> None:
+    """``out = [F, S, T]`` of ``z + shift`` about the reference centre ``c`` (updated in
+    place to the mean): one :func:`sweep` when ``c`` is near the mean, two otherwise (module
+    notes)."""
+    ranges = _halves(*z.shape)
+    with np.errstate(all="ignore"):         # NaN and Inf propagate to the caller's test
+        c[~np.isfinite(c)] = 0.0
+        r, acc = _sweep_all(z, w, shift, c, ranges)
+        rr = float(r @ r)
+        if not rr <= RECENTRE * acc[0]:     # c is not near the centre: sweep again from it
+            c += r
+            r, acc = _sweep_all(z, w, shift, c, ranges)
+            rr = float(r @ r)
+        c += r
+        out[0] = acc[0] - 2.0 * rr + acc[3] * rr
+        out[1] = acc[1]
+        out[2] = acc[2]
+
+
+def euler(x, dx, v, dv, h) -> None:
+    """:func:`euler_pair` (``v`` None: :func:`euler_one`) over the row ranges of
+    :func:`_halves` (element by element: the result does not depend on the split)."""
+    def part(i0, i1):
+        if v is None:
+            euler_one(x[i0:i1], dx[i0:i1], h)
+        else:
+            euler_pair(x[i0:i1], dx[i0:i1], v[i0:i1], dv[i0:i1], h)
+    _each(part, _halves(*x.shape))
 
 
 def euler_numpy(x, dx, v, dv, h, tmp) -> None:

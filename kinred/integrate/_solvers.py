@@ -144,10 +144,7 @@ def _euler_in_place(x, dx, v, dv, h, solver_state):
     arrays = (x, dx) if v is None else (x, dx, v, dv)
     if all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == x.shape
            for a in arrays) and x.ndim == 2:
-        if v is None:
-            _kernels.euler_one(x, dx, float(h))
-        else:
-            _kernels.euler_pair(x, dx, v, dv, float(h))
+        _kernels.euler(x, dx, v, dv, float(h))
         return
     if solver_state.scratch is None:
         solver_state.scratch = np.empty_like(x)
