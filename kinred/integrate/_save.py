@@ -61,7 +61,7 @@ class SaveAt:
         Names among ``"gamma"``, ``"lambda"``, ``"centre"``, ``"mean_velocity"`` and/or
         callables ``fn(t, x, v, weights) -> array`` (keyed by ``fn.__name__``; a mapping gives
         the keys). Default: ``("gamma", "lambda")`` (``("lambda",)`` for first-order scenes).
-        From ``N·d ≥ 2¹⁸`` (:data:`FUSED_MIN`) on, ``"gamma"`` and ``"lambda"`` are taken from
+        From ``N·d ≥ 2¹⁸`` on, ``"gamma"`` and ``"lambda"`` are taken from
         the loop's compiled pass over the state (equal to :func:`kinred.observables.gamma`
         and :func:`~kinred.observables.lambda_` to 1e-12 relative; below, bit for bit).
     states : bool or {"x", "v"}
