@@ -446,6 +446,11 @@ class DivergenceCheck:
             self._stop(t, step, x, v, why)
         return m
 
+    def initial_moments(self, v):
+        """The moments of the initial velocities as ``__call__`` gives them (None when the
+        guard does not measure them); the next step then starts from their centre."""
+        return self.moments(v) if self.guard is not None and self.guard.active else None
+
     def _stop(self, t, step, x, v, why):
         fixed_dt = self.dt if self.n_steps is not None else None
         if self.table is None:

@@ -255,5 +255,7 @@ class Moments:
     def __call__(self, z) -> tuple:
         """``(F, S, T)`` of ``z (+ shift)``."""
         if self.centre is None or self.centre.shape != z.shape[1:]:
-            self.centre = np.zeros(z.shape[1:])
+            # positions relative to their centroid: the shift is the first guess of the centre
+            self.centre = (np.array(self.shift, dtype=float) if self.shift is not None and
+                           np.shape(self.shift) == z.shape[1:] else np.zeros(z.shape[1:]))
         return state_moments(z, self.w, self.shift, self.centre)

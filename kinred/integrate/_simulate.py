@@ -310,7 +310,7 @@ def _loop(r: _Run) -> int:
     t, n, state = r.t0, 0, r.state
     f, rng, solver, control = r.f, r.rng, r.solver, r.control
     ss = solver.init(f, t, state, r.dt)
-    r.record(0, t, *state)
+    r.record(0, t, *state, r.check.initial_moments(state[1]))
     if r.observers:
         _notify(r, t, 0, 0.0, state, initial=True)
     times, steps = r.grid
