@@ -23,11 +23,17 @@ measured in one process run.
   unsoftened Morse, a spread short-range cloud, the dense refusal of N = 10⁷): see
   ``_bench_large_n_auto.py``.
 
+* ``overhead`` – ``simulate``'s own cost at N = 10⁵, d = 200, ``RandomBatch(p = 4)``, 10 Euler
+  steps with the default save (``--quick``: N = 10⁴): one right-hand side, a hand-written
+  Euler step, ``simulate``'s time per step and its overhead (target ≤ 15 % of the
+  right-hand sides).
+
 Run from the repository root::
 
     python benchmarks/bench_large_n.py                 # everything, full sizes
     python benchmarks/bench_large_n.py --quick         # reduced sizes (no N = 10⁶)
     python benchmarks/bench_large_n.py --only nufft    # one section
+    python benchmarks/bench_large_n.py --only overhead # simulate's loop against its rhs
 
 A new section: write ``section_<name>(args)`` printing its lines and add it to
 :data:`SECTIONS`.
@@ -196,7 +202,53 @@ def section_auto(args):
     run(quick=args.quick, repeat=1 if args.quick else args.repeat)
 
 
-SECTIONS = {"nufft": section_nufft, "random_batch": section_random_batch, "auto": section_auto}
+# ---------------------------------------------------------------------------- overhead
+def loop_overhead(n, d, p, steps, repeat):
+    """``simulate``'s own cost beside its right-hand sides: RandomBatch(p) Cucker–Smale
+    alignment (G = 1, β = 0.5, mean field), forward Euler, the default save (Γ and Λ at every
+    step, the final state), ``steps`` steps; best of ``repeat`` runs after a warm-up run."""
+    from kinred.integrate import simulate
+    from kinred.pairsum import RandomBatch
+
+    rng = np.random.default_rng(0)
+    x0, v0 = rng.uniform(0.0, 1.0, (n, d)), rng.normal(0.0, 1.0, (n, d))
+    scene = Scene([Alignment(CuckerSmale(1.0, 0.5))], "mean", pairsum=RandomBatch(p=p))
+    gen = np.random.default_rng(1)
+    x, v = x0.copy(), v0.copy()
+    h = 1e-3
+
+    def euler_by_hand():            # the Euler step of _bench_large_n_rbm.py
+        dx, dv = scene.rhs(x, v, rng=gen)
+        x.__iadd__(h * dx)
+        v.__iadd__(h * dv)
+
+    def run():
+        return simulate(scene, x0, v0, (0.0, steps * h), h, seed=1)
+
+    t_rhs, _ = best_time(lambda: scene.rhs(x0, v0, rng=gen), repeat)
+    t_hand, _ = best_time(euler_by_hand, repeat)
+    t_sim, tr = best_time(run, repeat)
+    per_step = t_sim / steps
+    assert tr.n_rhs_evals == steps
+    print(f"  N = {n}, d = {d}, RandomBatch(p={p}), {steps} Euler steps, default save:")
+    print(f"    one right-hand side {1e3 * t_rhs:.1f} ms; a hand-written Euler step (rhs + "
+          f"x += h dx, v += h dv) {1e3 * t_hand:.1f} ms")
+    print(f"    simulate {1e3 * per_step:.1f} ms per step ({1e3 * t_sim:.0f} ms for the run, "
+          f"validation, centring and the final state included)")
+    print(f"    overhead of simulate: {100 * (per_step - t_rhs) / t_rhs:.0f} % of the right-hand "
+          f"sides (target <= 15 %), {100 * (per_step - t_hand) / t_hand:.0f} % of the "
+          f"hand-written Euler steps")
+
+
+def section_overhead(args):
+    """``simulate``'s loop against its right-hand sides (issue 24, item 5)."""
+    print(f"simulate's own cost, {get_num_threads()} engine threads")
+    n = 10_000 if args.quick else 100_000
+    loop_overhead(n, 200, 4, 10, 1 if args.quick else args.repeat)
+
+
+SECTIONS = {"nufft": section_nufft, "random_batch": section_random_batch, "auto": section_auto,
+            "overhead": section_overhead}
 
 
 def main(argv=None) -> int:

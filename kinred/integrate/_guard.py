@@ -67,6 +67,7 @@ import numpy as np
 from .. import observables as _obs
 from ..dynamics import hooks as _hooks
 from ..errors import SimulationDiverged
+from ._kernels import Moments, state_moments
 from ._tables import RKTable
 
 __all__ = ["GROWTH", "GROWTH_NOISE", "Guard", "DivergenceCheck", "diverged", "energy_budget",
@@ -185,13 +186,13 @@ class Guard:
             return
         self._update(t0, self.q0)
 
-    def _q(self, v):
-        """``(Q, round-off allowance)`` at velocities ``v``."""
-        with np.errstate(over="ignore", invalid="ignore"):
-            sq = float(self.w @ np.einsum("ij,ij->i", v, v))
-            if self.budget.centred:
-                dev = _obs._deviations(v, self.w)  # the compensated centre of Γ
-                return float(self.w @ np.einsum("ij,ij->i", dev, dev)), _ROUNDOFF_CENTRED * sq
+    def _q(self, v, moments=None):
+        """``(Q, round-off allowance)`` at velocities ``v`` from their ``moments`` (computed
+        when None: one compiled call, :func:`.state_moments`: ``Γ`` with the compensated
+        centre and ``Σwᵢ|vᵢ|²``)."""
+        fluct, sq, _ = state_moments(v, self.w) if moments is None else moments
+        if self.budget.centred:
+            return fluct, _ROUNDOFF_CENTRED * sq
         return sq, _ROUNDOFF * sq
 
     def _key(self, t, q):
@@ -214,11 +215,12 @@ class Guard:
             self.lo = key
             self.anchor = (t, q)
 
-    def check(self, t: float, v) -> str | None:
-        """``None`` if ``Q(t)`` is within the bound, else the reason to stop (one sentence)."""
+    def check(self, t: float, v, moments=None) -> str | None:
+        """``None`` if ``Q(t)`` is within the bound, else the reason to stop (one sentence);
+        ``moments``: those of ``v`` if known (:func:`.state_moments`)."""
         if not self.active:
             return None
-        q, slack = self._q(v)
+        q, slack = self._q(v, moments)
         if not math.isfinite(q):
             return None                     # the non-finite check reports it
         bound = self.bound(t)
@@ -437,16 +439,27 @@ class DivergenceCheck:
     def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w):
         self.scene, self.table, self.method, self.dt = scene, table, method, dt
         self.n_steps, self.t0, self.x0, self.v0 = n_steps, t0, x0, v0
+        self.moments = Moments(w)           # the compiled moments of v, step after step
         self.guard = Guard(scene, v0, w, t0) if scene.order == 2 else None
 
     def __call__(self, t, step, x, v):
-        """Raise :class:`~kinred.errors.SimulationDiverged` if the state at ``t`` diverged."""
-        s = float(np.sum(x)) + (float(np.sum(v)) if v is not None else 0.0)
+        """Raise :class:`~kinred.errors.SimulationDiverged` if the state at ``t`` diverged;
+        returns the moments ``(Γ, Σwᵢ|vᵢ|², Σvᵢⱼ)`` of ``v`` (:func:`.state_moments`) when the
+        guard measured them, else None."""
+        active = self.guard is not None and self.guard.active
+        m = self.moments(v) if active else None
+        s = float(np.sum(x)) + (m[2] if active else float(np.sum(v)) if v is not None else 0.0)
         if not math.isfinite(s):
             self._stop(t, step, x, v, "the state became non-finite (NaN/Inf/overflow)")
-        why = self.guard.check(t, v) if self.guard is not None else None
+        why = self.guard.check(t, v, m) if self.guard is not None else None
         if why is not None:
             self._stop(t, step, x, v, why)
+        return m
+
+    def initial_moments(self, v):
+        """The moments of the initial velocities as ``__call__`` gives them (None when the
+        guard does not measure them); the next step then starts from their centre."""
+        return self.moments(v) if self.guard is not None and self.guard.active else None
 
     def _stop(self, t, step, x, v, why):
         fixed_dt = self.dt if self.n_steps is not None else None

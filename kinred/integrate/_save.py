@@ -18,6 +18,7 @@ import numpy as np
 from .. import observables as _obs
 from .._validate import _short, as_array, as_int, check_alloc, fmt_count
 from ..errors import InvalidInput
+from ._kernels import Moments
 
 __all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_save_size"]
 
@@ -25,6 +26,16 @@ __all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_
 #: per recorded observable value (a small array object and its list slot) besides its data.
 GRID_POINT_BYTES = 64
 OBS_VALUE_BYTES = 128
+
+#: From this many state entries ``N·d`` on, the built-in ``"gamma"`` and ``"lambda"`` are
+#: recorded from the loop's compiled pass (:func:`._kernels.state_moments`: no copy of the
+#: state, ``Γ`` shared with the divergence guard); they agree with
+#: :func:`kinred.observables.gamma` and :func:`~kinred.observables.lambda_` of the saved
+#: state to 1e-12 relative. Below it they are those functions' values, bit for bit.
+FUSED_MIN = 2 ** 18
+
+#: The built-ins the compiled pass gives: name -> (state index 0 = x, 1 = v).
+_FUSED = {"gamma": 1, "lambda": 0}
 
 _BUILTIN = {
     "gamma": (2, lambda t, x, v, w: _obs.gamma(v, w)),
@@ -50,6 +61,9 @@ class SaveAt:
         Names among ``"gamma"``, ``"lambda"``, ``"centre"``, ``"mean_velocity"`` and/or
         callables ``fn(t, x, v, weights) -> array`` (keyed by ``fn.__name__``; a mapping gives
         the keys). Default: ``("gamma", "lambda")`` (``("lambda",)`` for first-order scenes).
+        From ``N·d ≥ 2¹⁸`` on, ``"gamma"`` and ``"lambda"`` are taken from
+        the loop's compiled pass over the state (equal to :func:`kinred.observables.gamma`
+        and :func:`~kinred.observables.lambda_` to 1e-12 relative; below, bit for bit).
     states : bool or {"x", "v"}
         Record full states (``True``: both) – off by default.
 
@@ -229,6 +243,13 @@ class Recorder:
     def __init__(self, save, obs, scene, w, shift, shape, n_save):
         self.obs, self.w, self.shift = obs, w, shift
         self.rec = {name: [] for name, _ in obs}
+        fused = shape[0] * shape[1] >= FUSED_MIN
+        # (name, state index) of the observables taken from the compiled pass
+        self.fused = [(name, _FUSED[name]) for name, fn in obs
+                      if fused and name in _FUSED and fn is _BUILTIN[name][1]]
+        self.plain = [(name, fn) for name, fn in obs if (name, _FUSED.get(name)) not in
+                      self.fused]
+        self.moments = (Moments(w, shift), Moments(w))     # of x (+ shift), of v
         want_x = save.states in (True, "x")
         want_v = save.states in (True, "v") and scene.order == 2
         self.X = np.empty((n_save, *shape)) if want_x else None
@@ -238,18 +259,26 @@ class Recorder:
         self.last = n_save - 1 if not isinstance(save.states, str) and not save.states else -1
         self.final = None
 
-    def __call__(self, j, t, x, v):
-        """Record save point ``j`` at time ``t`` from the working state ``(x, v)``."""
-        xt = x + self.shift if self.shift is not None else x
-        for name, fn in self.obs:
+    def __call__(self, j, t, x, v, v_moments=None):
+        """Record save point ``j`` at time ``t`` from the working state ``(x, v)``;
+        ``v_moments``: :func:`._kernels.state_moments` of ``v`` if known (the guard's)."""
+        for name, k in self.fused:
+            if k == 1 and v_moments is None:
+                v_moments = self.moments[1](v)
+            val = v_moments[0] if k == 1 else self.moments[0](x)[0]
+            self.rec[name].append(np.asarray(val, dtype=float))
+        xt = x
+        if self.shift is not None and (self.plain or self.X is not None or j == self.last):
+            xt = np.add(x, self.shift, out=self.X[j] if self.X is not None else None)
+        for name, fn in self.plain:
             self.rec[name].append(np.asarray(fn(t, xt, v, self.w), dtype=float))
-        if self.X is not None:
-            self.X[j] = xt
+        if self.X is not None and xt is x:
+            self.X[j] = x
         if self.V is not None:
             self.V[j] = v
         if j == self.last:
-            self.final = ((xt.copy() if xt is x else xt)[None],
-                          None if v is None else v.copy()[None])
+            # the run ends here: the working arrays become the result (no copy)
+            self.final = (xt[None], None if v is None else v[None])
 
     def states(self, times: np.ndarray) -> tuple:
         """``(x, v, t_states)``: the recorded states and their times (the save times), or,

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._repr import brief, result_repr, sample_rows, table
 from .._rng import as_generator
-from .._validate import as_float, as_int, as_span
+from .._validate import _short, as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
@@ -179,8 +179,8 @@ class _Run:
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
              method: str = "euler", save: SaveAt | None = None, seed=None, progress: bool = False,
-             rtol: float = 1e-6, atol: float = 1e-9, max_steps: int | None = None,
-             observers=None) -> Trajectory:
+             rtol: float | None = None, atol: float | None = None, max_steps: int | None = None,
+             observers=None, stepsize_controller=None) -> Trajectory:
     r"""Integrate a scene from ``(x0, v0)`` over ``t_span``.
 
     Forward Euler is the paper's scheme (eq. (1.6); on a projected scene
@@ -222,8 +222,8 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     progress : bool
         Show a tqdm progress bar (steps for fixed-step methods; the time reached out of
         ``t1 − t0``, with its rate and remaining time, for adaptive ones).
-    rtol, atol : float
-        Tolerances of adaptive methods.
+    rtol, atol : float, optional
+        Tolerances of adaptive methods (default ``1e-6`` and ``1e-9``).
     max_steps : int, optional
         Budget of accepted plus rejected steps of adaptive methods; default
         ``max(100 000, 1000·⌈(t1 − t0)/dt⌉)``.
@@ -234,6 +234,13 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
         ``.shift``, ``.step``, ``.h``): for quantities that need every step (certificates,
         energies, diagnostics). An observer with a ``methods`` attribute (tuple of names)
         accepts only those methods.
+    stepsize_controller : ConstantStep or AdaptiveStep, optional
+        Which steps are tried and kept (Diffrax's ``stepsize_controller``). Default: the
+        method's own, ``ConstantStep()`` for fixed-step methods and ``AdaptiveStep(rtol,
+        atol, max_steps)`` for adaptive ones (the same run as passing it). An
+        :class:`AdaptiveStep` needs a method with an error estimate (``"rk45"``,
+        ``"rk23"``); :class:`ConstantStep` runs any method at the fixed step ``dt``. With a
+        controller, give the tolerances and the budget to it, not to ``simulate``.
 
     Returns
     -------
@@ -268,7 +275,7 @@ def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
     """
     t_start = time.perf_counter()
     run = _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_steps,
-                   observers)
+                   observers, stepsize_controller)
     bar = None
     if progress:
         bar = Progress(run.method, run.control.n_steps, run.t1 - run.t0)
@@ -302,7 +309,7 @@ def _loop(r: _Run) -> int:
     t, n, state = r.t0, 0, r.state
     f, rng, solver, control = r.f, r.rng, r.solver, r.control
     ss = solver.init(f, t, state, r.dt)
-    r.record(0, t, *state)
+    r.record(0, t, *state, r.check.initial_moments(state[1]))
     if r.observers:
         _notify(r, t, 0, 0.0, state, initial=True)
     times, steps = r.grid
@@ -316,9 +323,9 @@ def _loop(r: _Run) -> int:
                 lands = False
                 continue
             t, state, ss, n = t_end, new, new_ss, n + 1
-            r.check(t, n, *state)
+            moments = r.check(t, n, *state)
             if lands:
-                r.record(j, times[j], *state)
+                r.record(j, times[j], *state, moments)
             if r.observers:
                 _notify(r, t, n, h, state)
             control.accepted(t, solver, ss)
@@ -335,8 +342,34 @@ def _notify(r: _Run, t, n, h, state, initial=False):
             init(t, view, r.scene)
 
 
+def _controller(given, spec, rtol, atol, max_steps):
+    """The step-size controller of the run: ``given`` (validated against the method and the
+    tolerance arguments) or the method's default."""
+    if given is None:           # the tolerances are validated whatever the method
+        adaptive = AdaptiveStep(rtol=1e-6 if rtol is None else rtol,
+                                atol=1e-9 if atol is None else atol, max_steps=max_steps)
+        return adaptive if spec.adaptive else ConstantStep()
+    if not isinstance(given, (ConstantStep, AdaptiveStep)):
+        raise InvalidInput(f"stepsize_controller must be a kinred.integrate.ConstantStep or "
+                           f"AdaptiveStep (or None: the method's own), got {_short(given)}")
+    named = [f"{k}={v!r}" for k, v in (("rtol", rtol), ("atol", atol),
+                                       ("max_steps", max_steps)) if v is not None]
+    if named:
+        where = ("pass them to AdaptiveStep(...)" if isinstance(given, AdaptiveStep) else
+                 "ConstantStep keeps every step and has no tolerances")
+        raise InvalidInput(f"simulate got stepsize_controller={given!r} and "
+                           f"{', '.join(named)}: with a controller the tolerances and the step "
+                           f"budget belong to it ({where})")
+    if given.adaptive and not spec.adaptive:
+        adaptive = sorted(m for m, sp in SOLVERS.items() if sp.adaptive)
+        raise InvalidInput(f"stepsize_controller={given!r} needs a method with an error "
+                           f"estimate, got method={spec.name!r}; use one of "
+                           f"{', '.join(map(repr, adaptive))}, or ConstantStep()")
+    return given
+
+
 def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_steps,
-             observers) -> _Run:
+             observers, stepsize_controller=None) -> _Run:
     """Validate the arguments of :func:`simulate` (before any allocation) and build the run."""
     if not isinstance(scene, Scene):
         raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
@@ -354,15 +387,15 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     save = SaveAt() if save is None else save
     if not isinstance(save, SaveAt):
         raise InvalidInput(f"save must be a SaveAt, got {save!r}")
-    adaptive = AdaptiveStep(rtol=rtol, atol=atol, max_steps=max_steps)
+    controller = _controller(stepsize_controller, spec, rtol, atol, max_steps)
     rng = as_generator(seed)
     if not (scene.stochastic or getattr(scene.pairsum, "stochastic", False) is True):
         rng = None              # deterministic scenes: the drift gets rng=None
     obs = observable_list(save.observables, scene.order)
     w = scene.agent_weights(x0.shape[0])
     solver = spec.make()
-    control = (adaptive if spec.adaptive else ConstantStep()).init(solver, t0, t1, dt, method)
-    n_steps = None if spec.adaptive else control.n_steps
+    control = controller.init(solver, t0, t1, dt, method)
+    n_steps = None if controller.adaptive else control.n_steps
     check_save_size(save, save_points(save, t0, t1, dt, n_steps), x0.shape, scene.order,
                     len(obs), f"simulate(x0 of shape {x0.shape}, t_span=({t0:g}, {t1:g}), "
                               f"dt={dt:g}, save={save.describe()})")

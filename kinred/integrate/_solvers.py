@@ -35,6 +35,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from . import _kernels
 from ._guard import real_stability
 from ._tables import EULER, RKTable
 
@@ -136,6 +137,20 @@ def _combine(x, v, ks, weights, h):
     return xn, vn
 
 
+def _euler_in_place(x, dx, v, dv, h, solver_state):
+    """``x ← x + h·dx``, then ``v ← v + h·dv``, in place: by the compiled kernel
+    (:mod:`._kernels`, one pass, no temporary) for float64 arrays of one shape, else through
+    numpy and a scratch array; the same rounding either way."""
+    arrays = (x, dx) if v is None else (x, dx, v, dv)
+    if all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == x.shape
+           for a in arrays) and x.ndim == 2:
+        _kernels.euler(x, dx, v, dv, float(h))
+        return
+    if solver_state.scratch is None:
+        solver_state.scratch = np.empty_like(x)
+    _kernels.euler_numpy(x, dx, v, dv, h, solver_state.scratch)
+
+
 def _sq(pair):
     return sum(float(np.sum(a * a)) for a in pair if a is not None)
 
@@ -159,8 +174,8 @@ class ExplicitRK:
     ``y + h Σₛ Bₛ kₛ`` and, for an embedded pair, the error estimate ``h Σₛ Eₛ kₛ``.
 
     A one-stage table without error estimate (forward Euler, eq. (1.6)) updates the state in
-    place through one scratch array (``x += h·dx`` as ``tmp = dx·h; x += tmp``: the same
-    rounding as ``x + h·dx``, no fresh array per step).
+    place in one compiled pass (``x ← x + dx·h``, then ``v``; the same rounding as numpy's
+    ``tmp = dx·h; x += tmp``; no fresh array per step).
 
     Parameters
     ----------
@@ -193,22 +208,15 @@ class ExplicitRK:
         return real_stability(self.table)
 
     def init(self, f, t0, state, dt):
-        """The scratch array of the in-place one-stage step; an empty state otherwise."""
-        if self._in_place:
-            return _RKState(scratch=np.empty_like(state[0]))
+        """An empty state (the in-place one-stage step makes its scratch array if needed)."""
         return _RKState()
 
     def step(self, f, t, state, h, solver_state, rng):
         """One step of size ``h`` from ``(t, state)``; see :class:`Solver`."""
         x, v = state
         if self._in_place:
-            tmp = solver_state.scratch
             dx, dv = f(t, x, v, rng)
-            np.multiply(dx, h, out=tmp)     # dx may be v itself: x first, then v
-            x += tmp
-            if v is not None:
-                np.multiply(dv, h, out=tmp)
-                v += tmp
+            _euler_in_place(x, dx, v, dv, h, solver_state)
             return (x, v), None, solver_state
         table = self.table
         ks = _stages(f, table, t, x, v, h, solver_state.k0, rng)

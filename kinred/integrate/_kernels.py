@@ -1,0 +1,261 @@
+r"""Private numba kernels of ``simulate``'s loop, each with a plain-numpy twin.
+
+The loop's own work per step is a few passes over the state ``(N, d)``: the Euler update,
+the divergence guard's moments and, at the save points, the fluctuations ``Γ`` and ``Λ``
+(§3.4.1 of the paper). At ``N·d ~ 10⁷`` each numpy pass allocates a temporary of the state's
+size (the update's ``h·dx``, the centred deviations), and the loop cost several right-hand
+sides; these kernels do the same work in place, with no temporary.
+
+Kernels
+-------
+``euler_pair(x, dx, v, dv, h)`` / ``euler_one(x, dx, h)``
+    ``x ← x + dx·h`` then ``v ← v + dv·h`` in place, element by element (``dx`` may be ``v``
+    itself: each element of ``x`` is updated from the old ``v`` before ``v`` changes). No
+    fastmath: the product is rounded before the sum, so the result is *bit-identical* to
+    numpy's ``tmp = dx·h; x += tmp`` of forward Euler (eq. (1.6)); :func:`euler` runs them
+    over two row halves. Twin: :func:`euler_numpy`.
+``sweep(z, w, shift, c, r, acc)``
+    One pass over the rows of ``a = z + shift`` (``z (n, d)``, ``shift (d,)``; each entry
+    rounded as numpy's ``z + shift``, without that array) with weights ``w``:
+    ``r = Σᵢ wᵢ(aᵢ − c)`` and ``acc = [Σᵢ wᵢ‖aᵢ − c‖², Σᵢ wᵢ‖aᵢ‖², Σᵢⱼ aᵢⱼ, Σᵢ wᵢ]``, rows summed
+    in blocks of :data:`BLOCK` (error growth ``O((d + n/BLOCK + BLOCK)·u)``, not ``O(n·d·u)``).
+
+:func:`moments` ``(z, w, shift, c, out)`` joins the sweeps of two row halves into
+``out = [F, S, T]``: the fluctuation ``F = Σᵢ wᵢ‖aᵢ − a_c‖²`` (``Γ`` or ``Λ`` of §3.4.1), the
+second moment ``S = Σᵢ wᵢ‖aᵢ‖²`` and the plain sum ``T`` (non-finite iff a coordinate is, or
+the sum overflows: the loop's finiteness test). ``F`` is taken about the reference centre
+``c`` as :mod:`kinred.observables` takes it about its compensated centre: from one sweep,
+``F = S₂ − 2‖r‖² + W‖r‖²`` (``S₂ = Σ wᵢ‖aᵢ − c‖²``, ``W = Σ wᵢ``), which is
+``Σ wᵢ‖(aᵢ − c) − r‖²`` exactly. When ``c`` is far from the mean (``‖r‖² > RECENTRE·S₂``) a
+second sweep starts from ``c + r``, the compensated centre; ``c`` is updated in place to the
+mean, so that a caller passing it again on the next step (the state moved a little) needs
+one sweep. Twin: :func:`moments_numpy` (the formulas of :func:`kinred.observables.gamma`),
+equal to 1e-12 relative.
+
+Flags: ``cache=True``, ``nogil=True``; no fastmath in the Euler update (numpy's rounding),
+re-association and contraction only in :func:`moments` (vectorized sums; NaN and Inf
+propagate as in IEEE arithmetic).
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor, wait
+
+import numpy as np
+from numba import njit
+
+from ..dynamics import get_num_threads
+
+__all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
+           "moments_numpy", "state_moments", "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
+
+#: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
+#: reductions); NaN and Inf still propagate.
+_FM = {"reassoc", "contract"}
+
+#: Rows per partial sum of :func:`moments`.
+BLOCK = 256
+
+#: From this many entries ``N·d`` on, :func:`moments` and :func:`euler` split the rows in two
+#: halves, the second one in a worker thread when the engine has two threads or more
+#: (:func:`kinred.dynamics.set_num_threads`); the halves are the same with one thread.
+SPLIT_MIN = 2 ** 20
+
+_POOL: list = [None, 0]
+
+#: :func:`moments` sweeps a second time when its reference centre ``c`` is further from the
+#: weighted mean ``m`` than ``‖m − c‖² > RECENTRE·Σ wᵢ‖aᵢ − c‖²``; below it the one sweep is
+#: as accurate as two (the cancellation in ``S₂ − ‖r‖²`` loses at most a factor 1.001).
+RECENTRE = 1e-3
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def euler_pair(x, dx, v, dv, h):  # pragma: no cover - compiled
+    n, d = x.shape
+    for i in range(n):
+        for j in range(d):
+            x[i, j] = x[i, j] + dx[i, j] * h
+            v[i, j] = v[i, j] + dv[i, j] * h
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def euler_one(x, dx, h):  # pragma: no cover - compiled
+    n, d = x.shape
+    for i in range(n):
+        for j in range(d):
+            x[i, j] = x[i, j] + dx[i, j] * h
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
+    """One pass: ``r = Σ w (a − c)``, ``acc = [Σ w|a − c|², Σ w|a|², Σ a, Σ w]``, ``a = z + shift``."""
+    n, d = z.shape
+    blk = np.zeros(d)
+    part = np.zeros(4)
+    for j in range(d):
+        r[j] = 0.0
+    for k in range(4):
+        acc[k] = 0.0
+    for i in range(n):
+        wi = w[i]
+        rc = 0.0
+        rs = 0.0
+        rt = 0.0
+        for j in range(d):
+            a = z[i, j] + shift[j]
+            e = a - c[j]
+            blk[j] += wi * e
+            rc += e * e
+            rs += a * a
+            rt += a
+        part[0] += wi * rc
+        part[1] += wi * rs
+        part[2] += rt
+        part[3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            for j in range(d):
+                r[j] += blk[j]
+                blk[j] = 0.0
+            for k in range(4):
+                acc[k] += part[k]
+                part[k] = 0.0
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The one worker thread that takes the second half of the rows (made anew in a forked
+    process, where the parent's thread does not exist)."""
+    if _POOL[0] is None or _POOL[1] != os.getpid():
+        _POOL[:] = [ThreadPoolExecutor(max_workers=1, thread_name_prefix="kinred-loop"),
+                    os.getpid()]
+    return _POOL[0]
+
+
+def _halves(n: int, d: int) -> list:
+    """Row ranges of one call: two halves (at a multiple of :data:`BLOCK`) from
+    :data:`SPLIT_MIN` entries on, whatever the thread count (the sums do not depend on it)."""
+    if n * d < SPLIT_MIN or n < 2 * BLOCK:
+        return [(0, n)]
+    mid = (n // 2) // BLOCK * BLOCK
+    return [(0, mid), (mid, n)]
+
+
+def _each(fn, ranges) -> list:
+    """``[fn(i0, i1)]`` over the row ranges: the second one in the worker thread when the
+    engine has two threads or more (the kernels release the GIL)."""
+    if len(ranges) == 1 or get_num_threads() < 2:
+        return [fn(*rg) for rg in ranges]
+    fut = _pool().submit(fn, *ranges[1])
+    try:
+        first = fn(*ranges[0])
+    finally:
+        wait([fut])         # never leave the worker writing into the caller's arrays
+    return [first, fut.result()]
+
+
+def _sweep_all(z, w, shift, c, ranges):
+    """``(r, acc)`` of :func:`sweep` over all rows: the ranges' partial sums, added in order."""
+    def part(i0, i1):
+        r, acc = np.empty(z.shape[1]), np.empty(4)
+        sweep(z[i0:i1], w[i0:i1], shift, c, r, acc)
+        return r, acc
+    parts = _each(part, ranges)
+    r, acc = parts[0]
+    for rp, ap in parts[1:]:
+        r, acc = r + rp, acc + ap
+    return r, acc
+
+
+def moments(z, w, shift, c, out) -> None:
+    """``out = [F, S, T]`` of ``z + shift`` about the reference centre ``c`` (updated in
+    place to the mean): one :func:`sweep` when ``c`` is near the mean, two otherwise (module
+    notes)."""
+    ranges = _halves(*z.shape)
+    with np.errstate(all="ignore"):         # NaN and Inf propagate to the caller's test
+        c[~np.isfinite(c)] = 0.0
+        r, acc = _sweep_all(z, w, shift, c, ranges)
+        rr = float(r @ r)
+        if not rr <= RECENTRE * acc[0]:     # c is not near the centre: sweep again from it
+            c += r
+            r, acc = _sweep_all(z, w, shift, c, ranges)
+            rr = float(r @ r)
+        c += r
+        out[0] = acc[0] - 2.0 * rr + acc[3] * rr
+        out[1] = acc[1]
+        out[2] = acc[2]
+
+
+def euler(x, dx, v, dv, h) -> None:
+    """:func:`euler_pair` (``v`` None: :func:`euler_one`) over the row ranges of
+    :func:`_halves` (element by element: the result does not depend on the split)."""
+    def part(i0, i1):
+        if v is None:
+            euler_one(x[i0:i1], dx[i0:i1], h)
+        else:
+            euler_pair(x[i0:i1], dx[i0:i1], v[i0:i1], dv[i0:i1], h)
+    _each(part, _halves(*x.shape))
+
+
+def euler_numpy(x, dx, v, dv, h, tmp) -> None:
+    """Twin of :func:`euler_pair` (``v`` None: of :func:`euler_one`): numpy's in-place Euler
+    update through the scratch array ``tmp``."""
+    np.multiply(dx, h, out=tmp)     # dx may be v itself: x first, then v
+    x += tmp
+    if v is not None:
+        np.multiply(dv, h, out=tmp)
+        v += tmp
+
+
+def moments_numpy(z, w, shift=None) -> np.ndarray:
+    """Twin of :func:`moments`: ``[F, S, T]`` by the formulas of :mod:`kinred.observables`."""
+    z = z + shift if shift is not None else z
+    m1 = w @ z
+    dev = z - m1
+    dev -= w @ dev
+    return np.array([float(w @ np.einsum("ij,ij->i", dev, dev)),
+                     float(w @ np.einsum("ij,ij->i", z, z)), float(np.sum(z))])
+
+
+def _f64(a, shape) -> bool:
+    return type(a) is np.ndarray and a.dtype == np.float64 and a.shape == shape
+
+
+def state_moments(z, w, shift=None, centre=None) -> tuple:
+    """``(F, S, T)`` of :func:`moments` for ``z (N, d) + shift (d,)`` (None: no shift) and
+    weights ``w (N,)``: compiled for float64 arrays, the twin otherwise. ``centre (d,)``: the
+    reference centre, updated in place (None: start from 0)."""
+    z = np.asarray(z)
+    if (z.ndim == 2 and _f64(z, z.shape) and _f64(w, z.shape[:1])
+            and (shift is None or _f64(shift, z.shape[1:]))):
+        out = np.empty(3)
+        c = np.zeros(z.shape[1]) if centre is None else centre
+        moments(z, w, np.zeros(z.shape[1]) if shift is None else shift, c, out)
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = moments_numpy(np.asarray(z, dtype=float), np.asarray(w, dtype=float),
+                                None if shift is None else np.asarray(shift, dtype=float))
+    return float(out[0]), float(out[1]), float(out[2])
+
+
+class Moments:
+    """:func:`state_moments` of one array of a run, step after step, with its reference
+    centre carried over (one sweep per call while the mean moves little).
+
+    Parameters
+    ----------
+    w : (N,) ndarray
+        Agent weights.
+    shift : (d,) ndarray, optional
+        Added to the array (the run's working positions are relative to it).
+    """
+
+    def __init__(self, w, shift=None):
+        self.w, self.shift, self.centre = w, shift, None
+
+    def __call__(self, z) -> tuple:
+        """``(F, S, T)`` of ``z (+ shift)``."""
+        if self.centre is None or self.centre.shape != z.shape[1:]:
+            # positions relative to their centroid: the shift is the first guess of the centre
+            self.centre = (np.array(self.shift, dtype=float) if self.shift is not None and
+                           np.shape(self.shift) == z.shape[1:] else np.zeros(z.shape[1:]))
+        return state_moments(z, self.w, self.shift, self.centre)
