@@ -44,7 +44,6 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
 
 import numpy as np
 
