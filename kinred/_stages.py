@@ -328,9 +328,8 @@ class StageStore:
 
         Either way the value is what a resume loads: a computed stage is read back from the
         file just written (without a folder, from a temporary one), so a first run and a
-        resumed one continue from the same objects (e.g. 0-d arrays, not Python floats). A
-        saver of its own format without the digest (two arguments) is the exception: its
-        stage is recomputed on resume, and the computed value is returned.
+        resumed one continue from the same objects (e.g. 0-d arrays, not Python floats). With a
+        saver of its own format (two arguments, no digest) the computed value is returned.
         ``status[name]`` records which of the two happened.
         """
         value = self.load(name, load=load, label=label)
@@ -349,7 +348,7 @@ class StageStore:
     def _read_back(self, path: Path, value, load, save):
         """What a resume loads from ``path`` (just written from ``value``)."""
         if save is not None and not _takes_stamp(save):
-            return value                            # no digest: a resume recomputes it
+            return value                            # a format of its own: kept as computed
         try:
             return self._read(path, load)
         except DamagedFile:                         # a saver that did not write it readably

@@ -53,7 +53,9 @@ from ..errors import InvalidInput, KinredWarning
 from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
 from . import kinetic_certify as _cert
 from . import kinetic_report
-from ._kinetic_stage import LABELS, NOT_NUMBERS, KStage
+from ._kinetic_stage import LABELS as _LABELS
+from ._kinetic_stage import NOT_NUMBERS as _NOT_NUMBERS
+from ._kinetic_stage import KStage
 
 __all__ = ["KStage", "LABELS", "NOT_NUMBERS", "RunResult", "SharedStages", "run",
            "write_outputs"]
@@ -168,6 +170,14 @@ def _verdict(g, cfg):
 #: file: ``KStage.keys_for``).
 _SOL_KEYS = ("t", "x", "v", "weights", "eps", "n_atoms", "quantize_time", "simulate_time",
              "gamma", "milling")
+
+#: What every number of a run is (the fields of :class:`KStage` and the arrays of ``high``):
+#: "measured", "certified bound", "a-priori bound" (the paper's constants) or "estimate".
+#: Not numbers: :data:`NOT_NUMBERS`.
+LABELS = _LABELS
+#: Stage entries that are not numbers: the target dimension, the certificate's note and the
+#: reference's atom count (parameters and text).
+NOT_NUMBERS = _NOT_NUMBERS
 
 #: Seed index of the solve and reference stages: ``member_seed(cfg.seed, index)``.
 _SEEDS = {"solve": 0, "reference": 1}

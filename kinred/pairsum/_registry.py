@@ -64,7 +64,8 @@ def register_pairsum(name: str, make: Callable, *, keys: tuple = (), doc: str = 
     name : str
         Lower-case identifier, not registered yet.
     make : callable
-        ``make(**params) -> PairSum``, ``params`` the entry's keys (see :class:`PairSumType`).
+        ``make(**params) -> PairSum``, ``params`` the entry's keys (see
+        :class:`~kinred.pairsum.PairSumType`).
     keys : tuple of Key
         The options a scene file may give besides ``method``.
     doc : str
