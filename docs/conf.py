@@ -99,7 +99,7 @@ numpydoc_xref_param_type = False
 nitpicky = True
 nitpick_ignore_regex = [
     (r"py:.*", r"(numpy|scipy|concurrent|dask|distributed|ot|matplotlib)(\..*)?"),
-    (r"py:.*", r"(os|pathlib|json|tomllib)(\..*)?"),
+    (r"py:.*", r"(os|pathlib|json|tomllib|collections)(\..*)?"),
 ]
 # kinred's own references must all resolve: nothing of kinred is ignored.
 nitpick_ignore: list[tuple[str, str]] = []

@@ -28,6 +28,8 @@ def _num(v) -> str:
 
 
 def _array(a: np.ndarray) -> str:
+    if a.ndim == 0 and a.dtype.kind in "biufU":      # a 0-d array (e.g. read from an .npz)
+        return brief(a.item())
     if a.size <= 4 and a.ndim <= 1 and a.dtype.kind in "biuf":
         return "[" + ", ".join(_num(v) if a.dtype.kind == "f" else str(v) for v in a) + "]"
     shape = "(" + ", ".join(map(str, a.shape)) + ("," if a.ndim == 1 else "") + ")"

@@ -7,6 +7,7 @@ from __future__ import annotations
 import inspect
 import json
 import os
+import tempfile
 import warnings
 import weakref
 from pathlib import Path
@@ -283,14 +284,19 @@ class StageStore:
         if path is None or not path.is_file() or not (self.resume or name in self._written):
             return None
         try:
-            value = read_npz(path, what=f"{self.item} file") if load is None else load(path)
-            problem = self._stamp_problem(path)       # a sound file: is it this run's?
-            if problem:
-                raise DamagedFile(problem, path=str(path))
+            return self._read(path, load)
         except DamagedFile as exc:
             warnings.warn(f"{exc}; recomputing {label or 'the ' + self.item}", KinredWarning,
                           stacklevel=3)
             return None
+
+    def _read(self, path: Path, load):
+        """The value of the stage file ``path`` (:class:`~kinred.errors.DamagedFile` if it is
+        damaged or not this store's)."""
+        value = read_npz(path, what=f"{self.item} file") if load is None else load(path)
+        problem = self._stamp_problem(path)       # a sound file: is it this run's?
+        if problem:
+            raise DamagedFile(problem, path=str(path))
         if isinstance(value, dict):
             value.pop(STAGE_DIGEST, None)
         return value
@@ -320,6 +326,10 @@ class StageStore:
         """The value of stage ``name``: loaded if its file is there and sound, else ``compute()``
         written at once (see :meth:`load` and :meth:`save` for ``load``, ``save``, ``label``).
 
+        Either way the value is what a resume loads: a computed stage is read back from the
+        file just written (without a folder, from a temporary one), so a first run and a
+        resumed one continue from the same objects (e.g. 0-d arrays, not Python floats). With a
+        saver of its own format (two arguments, no digest) the computed value is returned.
         ``status[name]`` records which of the two happened.
         """
         value = self.load(name, load=load, label=label)
@@ -327,6 +337,34 @@ class StageStore:
             self.status[name] = "loaded"
             return value
         value = compute()
-        self.save(name, value, save=save)
+        if self.folder is None:
+            value = self._round_trip(name, value, load, save)
+        else:
+            self.save(name, value, save=save)
+            value = self._read_back(self.path(name), value, load, save)
         self.status[name] = "computed"
         return value
+
+    def _read_back(self, path: Path, value, load, save):
+        """What a resume loads from ``path`` (just written from ``value``)."""
+        if save is not None and not _takes_stamp(save):
+            return value                            # a format of its own: kept as computed
+        try:
+            return self._read(path, load)
+        except DamagedFile:                         # a saver that did not write it readably
+            return value
+
+    def _round_trip(self, name: str, value, load, save):
+        """``value`` written to and read back from a temporary stage file (no folder)."""
+        with tempfile.TemporaryDirectory(prefix="kinred-stage-") as tmp:
+            path = Path(tmp) / "stage.npz"
+            stamp = {STAGE_DIGEST: np.array(self.digest)}
+            if save is None:
+                if not isinstance(value, Mapping):
+                    return value                    # not a stage a file could hold
+                atomic_write_npz(path, {**value, **stamp})
+            elif _takes_stamp(save):
+                save(path, value, stamp)
+            else:
+                return value
+            return self._read_back(path, value, load, save)

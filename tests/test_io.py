@@ -262,6 +262,44 @@ def test_stage_store_computes_once_and_resumes(tmp_path):
     assert calls == [1, 1, 1] and mem.folder is None and mem.path("solve") is None
 
 
+def _same(a, b) -> bool:
+    """Equal values of the same types, dtypes and shapes (dicts key by key)."""
+    if isinstance(a, dict):
+        return (isinstance(b, dict) and a.keys() == b.keys()
+                and all(_same(a[k], b[k]) for k in a))
+    if isinstance(a, np.ndarray):
+        return (isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
+                and a.tobytes() == b.tobytes())
+    return type(a) is type(b) and a == b
+
+
+@pytest.mark.parametrize("folder", [True, False])
+def test_stage_store_returns_on_a_first_run_what_a_resume_loads(tmp_path, folder):
+    # issue 23 item 4: computed Python scalars, lists and str come back as the arrays a
+    # resumed run loads, so code after a stage sees the same objects either way
+    value = {"x": [1.0, 2.0], "s": 0.5, "n": 3, "flag": True, "note": "certified",
+             "a": np.arange(4, dtype=np.float32)[::2]}
+    path = tmp_path / "st"
+    store = StageStore(path if folder else None, "abc")
+    first = store.get_or_compute("k1", lambda: dict(value))
+    assert store.status == {"k1": "computed"}
+    store.close()
+    disk = StageStore(tmp_path / "disk", "abc")
+    disk.get_or_compute("k1", lambda: dict(value))
+    disk.close()
+    resumed = StageStore(tmp_path / "disk", "abc", resume=True)
+    loaded = resumed.get_or_compute("k1", lambda: 1 / 0)
+    assert resumed.status == {"k1": "loaded"}
+    assert _same(first, loaded), (first, loaded)
+    assert float(first["s"]) == 0.5 and first["a"].tolist() == [0.0, 2.0]
+    assert str(first["note"]) == "certified" and int(first["n"]) == 3
+    # a saver of its own format keeps its value (a text stage reads back as written)
+    got = StageStore(None, "abc").get_or_compute(
+        "t", lambda: "text", save=lambda p, v: atomic_write_text(p, v),
+        load=lambda p: read_text(p))
+    assert got == "text"
+
+
 def test_stage_store_refusals(tmp_path):
     path = tmp_path / "st"
     StageStore(path, "a" * 64, describe={"config": {"dt": 0.1, "k": [1]}, "seed": 1})

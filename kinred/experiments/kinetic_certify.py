@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InvalidInput, NotProjectable, SimulationDiverged
+from ._kinetic_stage import CERT_KEYS as _CERT_KEYS
 
 __all__ = ["AUTO_MAX_ATOMS", "CERT_KEYS", "Decision", "decide", "check_certifiable",
            "certify_stage", "measured_errors", "phase_diameter", "worst_ratio",
@@ -35,9 +36,9 @@ __all__ = ["AUTO_MAX_ATOMS", "CERT_KEYS", "Decision", "decide", "check_certifiab
 #: the particle system: O(N²(d + k)) per step and k).
 AUTO_MAX_ATOMS = 2000
 
-#: Arrays the certificate adds to a k stage (always present; NaN when not certified).
-CERT_KEYS = ("err_rms", "err_max", "cert_rms", "cert_max", "cert_w1", "cert_saturated",
-             "paper_rms", "paper_max", "bound_mixed", "vacuous", "cert_time", "cert_note")
+#: Arrays the certificate adds to a k stage (always present; NaN when not certified): the
+#: fields of ``KStage`` (:mod:`kinred.experiments.kinetic_run`) of the group ``"cert"``.
+CERT_KEYS = _CERT_KEYS
 
 #: Relative tolerance of the comparison between the certificate's runs and the pipeline's.
 SAME_RUN_RTOL = 1e-12

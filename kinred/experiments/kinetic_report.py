@@ -37,8 +37,9 @@ _T = r"time $t$ (scene units)"
 
 
 def _has(r, key) -> bool:
-    """Whether the per-k dict ``r`` has array ``key`` with a finite value (a k that was not
-    certified has NaN certificate arrays)."""
+    """Whether the k stage ``r`` (a :class:`~kinred.experiments.kinetic_run.KStage`, or a
+    mapping of its arrays) has array ``key`` with a finite value (a k that was not certified
+    has NaN certificate arrays)."""
     return key in r and bool(np.any(np.isfinite(np.asarray(r[key], dtype=float))))
 
 

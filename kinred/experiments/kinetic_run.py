@@ -29,8 +29,9 @@ refused (:class:`~kinred.errors.DamagedFile`). Random draws of the dynamics (a r
 pair sum) come from the scene's ``seed``: stage ``solve`` uses ``member_seed(seed, 0)``, the
 reference ``member_seed(seed, 1)``, and each reduced run the seed of the solution it reduces.
 
-Every number is labelled (:data:`LABELS`): measured, certified bound, a-priori bound (the
-paper's constants) or estimate; ``summary.json`` carries the labels.
+Each k stage is a :class:`KStage`, whose fields carry their label (:data:`LABELS`):
+measured, certified bound, a-priori bound (the paper's constants) or estimate;
+``summary.json`` carries the labels.
 
 :class:`~kinred.scenefile.Config`, :func:`~kinred.scenefile.load_config` and
 :func:`~kinred.scenefile.config_from_dict` are importable from here too.
@@ -43,7 +44,6 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
 
 import numpy as np
 
@@ -53,8 +53,12 @@ from ..errors import InvalidInput, KinredWarning
 from ..scenefile import SMALL_SCENE, Config, config_from_dict, load_config  # noqa: F401
 from . import kinetic_certify as _cert
 from . import kinetic_report
+from ._kinetic_stage import LABELS as _LABELS
+from ._kinetic_stage import NOT_NUMBERS as _NOT_NUMBERS
+from ._kinetic_stage import KStage
 
-__all__ = ["LABELS", "NOT_NUMBERS", "RunResult", "SharedStages", "run", "write_outputs"]
+__all__ = ["KStage", "LABELS", "NOT_NUMBERS", "RunResult", "SharedStages", "run",
+           "write_outputs"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -70,14 +74,8 @@ class RunResult:
     t : (T,) ndarray
     n_atoms, eps : int, float
     per_k : dict
-        ``{k: {name: array}}``: ``w1``, ``exact``, ``coupling``, ``uniform``, ``term_jl``,
-        ``term_quant``, ``bound``, ``C``, ``D_eps``, ``eps_jl``, ``alpha``, ``beta``, ``Lp``,
-        ``Lpp``, ``Lambda``, ``gamma``, ``milling``, optional ``w1_reference``, ``norm_M``;
-        the certificate's ``err_rms``, ``err_max`` (measured), ``cert_rms``, ``cert_max``,
-        ``cert_w1`` (certified bounds; NaN where not certified), ``cert_saturated``,
-        ``paper_rms``, ``paper_max`` (eq. (2.18), √2 × eq. (2.11)), ``bound_mixed``
-        (``term_quant + cert_w1``), ``vacuous`` (``bound`` above ``high["diameter"]``),
-        ``cert_time``, ``cert_note`` (0-d str array). What each is: :data:`LABELS`.
+        ``{k: KStage}``: the arrays of each k stage (:class:`KStage`: each field with what
+        it is; also a mapping, ``per_k[k]["w1"]``), the same on a first run and on resume.
     high : dict
         ``gamma``, ``milling`` of ``μᴺ(t)``; ``diameter`` (an upper bound of the diameter of
         ``supp μᴺ(t)`` in ``ℝ²ᵈ``, O(N·d)) and ``diameter_lower`` (a distance between two
@@ -168,39 +166,18 @@ def _verdict(g, cfg):
     return flocking_verdict(float(max(g, 0.0)), yes_below=cfg.yes_below, no_above=cfg.no_above)
 
 
-#: Arrays of a solve / reference stage file and of a k stage file (a file missing one is damaged).
+#: Arrays of a solve / reference stage file (a file missing one is damaged; those of a k stage
+#: file: ``KStage.keys_for``).
 _SOL_KEYS = ("t", "x", "v", "weights", "eps", "n_atoms", "quantize_time", "simulate_time",
              "gamma", "milling")
-_K_KEYS = ("k", "w1", "exact", "lower", "upper", "coupling", "uniform", "term_jl", "term_quant",
-           "bound", "bound_stated", "C", "D_eps", "eps_jl", "alpha", "beta", "Lp", "Lpp",
-           "Lambda", "norm_M", "L", "gamma", "milling", "y_final", "w_final", "simulate_time",
-           "wall_time") + _cert.CERT_KEYS
-_REF_KEYS = ("w1_reference", "w1_quantization")
 
-_M, _C, _A, _E = "measured", "certified bound", "a-priori bound", "estimate"
-#: What every number of a run is (per-k arrays and ``high``): "measured", "certified bound",
-#: "a-priori bound" (the paper's constants) or "estimate". Not numbers: :data:`NOT_NUMBERS`.
-LABELS = MappingProxyType({
-    # per k: W1(M#μᴺ(t), νᴺ(t)) and the reduced run
-    "w1": _M, "exact": _M, "coupling": _M, "uniform": _M, "lower": _C, "upper": _C,
-    "err_rms": _M, "err_max": _M, "gamma": _M, "milling": _M, "y_final": _M, "w_final": _M,
-    "simulate_time": _M, "wall_time": _M, "cert_time": _M, "norm_M": _M,
-    # the certificate (kinred.certify)
-    "cert_rms": _C, "cert_max": _C, "cert_w1": _C, "cert_saturated": _C,
-    # Theorem 4.3 with the proof's constants; Theorems 2.2/2.3's right-hand sides
-    "term_jl": _A, "term_quant": _A, "bound": _A, "bound_stated": _A, "bound_mixed": _A,
-    "vacuous": _A, "paper_rms": _A, "paper_max": _A,
-    "C": _A, "D_eps": _A, "L": _A, "Lp": _A, "Lpp": _A, "Lambda": _A,
-    "eps_jl": _M, "alpha": _M, "beta": _M,
-    # a finer reference
-    "w1_reference": _E, "w1_quantization": _E,
-    # high: μᴺ(t)
-    "diameter": _C, "diameter_lower": _M, "eps_reference": _A,
-    "x_final": _M, "v_final": _M, "weights": _M,     # the atoms of μᴺ(T), for the report
-})
+#: What every number of a run is (the fields of :class:`KStage` and the arrays of ``high``):
+#: "measured", "certified bound", "a-priori bound" (the paper's constants) or "estimate".
+#: Not numbers: :data:`NOT_NUMBERS`.
+LABELS = _LABELS
 #: Stage entries that are not numbers: the target dimension, the certificate's note and the
 #: reference's atom count (parameters and text).
-NOT_NUMBERS = ("k", "cert_note", "n_atoms_reference")
+NOT_NUMBERS = _NOT_NUMBERS
 
 #: Seed index of the solve and reference stages: ``member_seed(cfg.seed, index)``.
 _SEEDS = {"solve": 0, "reference": 1}
@@ -325,7 +302,7 @@ def _check_reference(cfg: Config, n_atoms: int) -> None:
                           f"reference_atoms = {cfg.reference_atoms} (valid: > {n_atoms})")
 
 
-def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=None):
+def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=None) -> KStage:
     """Stage ``k{k}``: the reduced run, W1, Theorem 4.3's bound, the certificate, observables."""
     from ..kinetic import compare, milling_index, reduce, reference_estimate, theorem_bound
     from ..observables import gamma
@@ -352,8 +329,7 @@ def _k_stage(cfg: Config, k: int, sol, ref, decision, diameter, quantization=Non
         est = reference_estimate(sol, ref, rred, quantization=quantization)
         out["w1_reference"] = est.w1_reference
         out["w1_quantization"] = est.w1_quantization
-    out["wall_time"] = time.perf_counter() - t0
-    return out
+    return KStage(**out, wall_time=time.perf_counter() - t0)
 
 
 def _open_stages(cfg: Config, out_dir, resume: bool):
@@ -428,9 +404,10 @@ def _run(cfg: Config, folder, stages, shared, progress, label, t_start) -> RunRe
     quant = None              # W1(μᴺ(t), μᴺ′(t)) on R^2d: the same for every k, computed once
     for k in cfg.ks:
         bar.set_postfix_str(f"k{k}")
-        per_k[k] = _stage(stages, shared, f"k{k}",
-                          lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter, quant),
-                          _K_KEYS + (_REF_KEYS if ref is not None else ()))
+        per_k[k] = KStage.from_arrays(_stage(
+            stages, shared, f"k{k}",
+            lambda k=k: _k_stage(cfg, k, sol, ref, decision, diameter, quant).arrays(),
+            KStage.keys_for(reference=ref is not None)))
         quant = per_k[k].get("w1_quantization", quant)
         bar.update(1)
     bar.close()

@@ -29,12 +29,16 @@ approximate (NUFFT, RandomBatch, CellList, Auto; a backend that does not say is 
 The exact engine's strip walker (row strips, their threads, distance blocks, products) is
 public in :mod:`kinred.pairsum.strips`, for other passes over all pairs (the certificate's).
 
-A new backend is one file implementing the protocol; kernels may declare a closed form
+Backends are known by name through one registry, :data:`PAIRSUMS`, shared by
+``Scene(pairsum="name")`` and scene files' ``[dynamics.pairsum] method = "name"``: a new
+backend is one file implementing the protocol and one :func:`register_pairsum` call; kernels may declare a closed form
 through ``compiled_form()`` (see :func:`compiled_form`). See docs/dynamics.md.
 """
 
 from ._base import (COMPILED_KINDS, PairSum, PairTerm, PairTerms, compiled_form, is_exact,
                     pair_form, tail_bound)
+from ._registry import (PAIRSUMS, PairSumType, make_pairsum, register_pairsum,
+                        unregister_pairsum)
 from ._select import as_pairsum
 from .auto import Auto, AutoPlan
 from .cells import CellList, CellListPlan
@@ -46,4 +50,5 @@ from .reference import Numpy, NumpyPlan
 __all__ = ["PairSum", "PairTerm", "PairTerms", "Dense", "DensePlan", "Numpy", "NumpyPlan",
            "RandomBatch", "RandomBatchPlan", "NUFFT", "NUFFTPlan", "as_pairsum", "compiled_form",
            "radial_profile", "COMPILED_KINDS", "is_exact", "CellList", "CellListPlan",
-           "tail_bound", "Auto", "AutoPlan", "pair_form"]
+           "tail_bound", "Auto", "AutoPlan", "pair_form", "PAIRSUMS", "PairSumType",
+           "register_pairsum", "unregister_pairsum", "make_pairsum"]

@@ -1,24 +1,22 @@
-"""``as_pairsum``: a backend from a ``Scene(pairsum=...)`` argument and its older aliases."""
+"""``as_pairsum``: a backend from a ``Scene(pairsum=...)`` argument and its older aliases.
+
+Names are those of the registry :data:`kinred.pairsum.PAIRSUMS` (shared with scene files'
+``[dynamics.pairsum]``), plus ``"fast"`` for ``"dense"``."""
 
 from __future__ import annotations
 
 from ..errors import InvalidInput
 from ._base import PairSum
-from .auto import Auto
-from .cells import CellList
+from ._registry import PAIRSUMS, make_pairsum
 from .dense import Dense
-from .nufft import NUFFT
-from .random_batch import RandomBatch
-from .reference import Numpy
 
-__all__ = ["as_pairsum"]
+__all__ = ["as_pairsum", "names"]
 
-#: Names accepted for ``pairsum=`` (and the older ``engine=``).
-ALIASES = ("fast", "dense", "numpy", "random_batch", "nufft", "cells", "auto")
 
-#: Names of backends other than the dense one, and what they build (default options).
-_OTHERS = {"numpy": Numpy, "random_batch": RandomBatch, "nufft": NUFFT, "cells": CellList,
-           "auto": Auto}
+def names() -> tuple:
+    """Names accepted for ``pairsum=`` (and the older ``engine=``): ``"fast"`` (the dense
+    backend) and every registered backend of :data:`~kinred.pairsum.PAIRSUMS`."""
+    return ("fast", *PAIRSUMS)
 
 
 def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = None,
@@ -27,7 +25,7 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
 
     Parameters
     ----------
-    pairsum : PairSum or {"fast", "dense", "numpy", "random_batch", "nufft", "cells", "auto"}, optional
+    pairsum : PairSum or str, optional
         A backend object (anything with ``plan`` and ``evaluate``, see
         :class:`~kinred.pairsum.PairSum`), or a name: ``"fast"``/``"dense"`` for
         :class:`~kinred.pairsum.Dense` (the default), ``"numpy"`` for the twin
@@ -36,7 +34,8 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
         :class:`~kinred.pairsum.NUFFT` with ``tol = 1e-6``, ``"cells"`` for
         :class:`~kinred.pairsum.CellList` with ``tol = 1e-6``, ``"auto"`` for
         :class:`~kinred.pairsum.Auto` (the deterministic backend of least estimated cost,
-        ``tol = 1e-6``; other options: pass the object).
+        ``tol = 1e-6``; other options: pass the object), or the name of a backend added by
+        :func:`~kinred.pairsum.register_pairsum` (built with its default options).
     engine : {"fast", "dense", "numpy", "random_batch", "nufft"}, optional
         The older name of ``pairsum`` (strings only); give one of the two.
     block, precision : optional
@@ -60,24 +59,25 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
     >>> as_pairsum("random_batch"), as_pairsum("nufft")
     (RandomBatch(p=2), NUFFT(tol=1e-06))
     """
+    aliases = names()
     if engine is not None:
         if pairsum is not None:
             raise InvalidInput(f"give pairsum= or its older alias engine=, not both; got "
                                f"pairsum={pairsum!r}, engine={engine!r}")
-        if not isinstance(engine, str) or engine not in ALIASES:
-            raise InvalidInput(f"engine must be one of {ALIASES}, got {engine!r}")
+        if not isinstance(engine, str) or engine not in aliases:
+            raise InvalidInput(f"engine must be one of {aliases}, got {engine!r}")
         pairsum = engine
     if pairsum is None:
         pairsum = "fast"
     if isinstance(pairsum, str):
-        if pairsum not in ALIASES:
-            raise InvalidInput(f"pairsum must be a PairSum backend or one of {ALIASES}, "
+        if pairsum not in aliases:
+            raise InvalidInput(f"pairsum must be a PairSum backend or one of {aliases}, "
                                f"got {pairsum!r}")
-        if pairsum not in _OTHERS:
+        if pairsum in ("fast", "dense"):
             return Dense(block=block, precision="double" if precision is None else precision)
     elif not isinstance(pairsum, PairSum):
         raise InvalidInput(f"pairsum must be a PairSum backend (an object with plan(scene, n, "
-                           f"dim) and evaluate(plan, x, v, rng)) or one of {ALIASES}, got "
+                           f"dim) and evaluate(plan, x, v, rng)) or one of {aliases}, got "
                            f"{pairsum!r}")
     if isinstance(pairsum, str) and pairsum == "numpy" and precision == "double":
         precision = None                # what the twin computes anyway
@@ -86,4 +86,4 @@ def as_pairsum(pairsum=None, *, engine: str | None = None, block: int | None = N
                            f"pairsum={pairsum!r} set them on the backend itself (e.g. "
                            f"pairsum=Dense(block=..., precision=...)); got block={block!r}, "
                            f"precision={precision!r}")
-    return _OTHERS[pairsum]() if isinstance(pairsum, str) else pairsum
+    return make_pairsum(pairsum) if isinstance(pairsum, str) else pairsum
