@@ -307,3 +307,56 @@ def test_auto_when_the_sparse_preflight_refuses():
     assert r.value == pytest.approx(0.1 * np.sqrt(3), rel=1e-12)
     with pytest.raises(TooLarge, match="method='sparse'.*atoms per side fit"):
         w1(x, x + 0.1, max_dense_bytes=0, max_bytes=10_000, max_exact_pairs=10)
+
+
+def _paired(n, d=4, seed=0):
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, d))
+    return x, x + 0.05 * rng.normal(size=(n, d))
+
+
+def test_a_forked_solve_gives_the_in_process_numbers(monkeypatch):
+    """Large graphs with a time budget solve in a forked child: the same plan and duals."""
+    x, y = _paired(3000)
+    ref = w1(x, y, "sparse", seed=0, max_dense_bytes=0)
+    monkeypatch.setattr(sparse_mod, "FORK_EDGES", 0)
+    got = w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=600.0)
+    assert got.exact and ref.exact
+    assert (got.value, got.lower, got.upper) == (ref.value, ref.lower, ref.upper)
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_a_solve_past_the_budget_is_stopped_and_its_bracket_certified(monkeypatch, paired):
+    """The network simplex cannot be interrupted, its child process can: a solve that would
+    run past ``max_seconds`` is stopped there, and the answer is the certified bracket of an
+    explicit coupling and 1-D projections (paired: the paired bracket), with the reason."""
+    import time
+
+    x, y = _paired(2000)
+    if not paired:
+        y = y[:1500]
+    exact = w1(x, y, "exact").value
+    monkeypatch.setattr(sparse_mod, "FORK_EDGES", 0)
+    monkeypatch.setattr(sparse_mod, "_solve", lambda *args: time.sleep(600))
+    t0 = time.perf_counter()
+    r = w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=3.0)
+    took = time.perf_counter() - t0
+    assert took < 30.0                                 # stopped near its 3 s, not after 600 s
+    assert not r.exact and "ran out during network-simplex solve 1" in r.note
+    assert r.lower <= exact <= r.upper
+    assert r.upper / exact < (1.01 if paired else 2.0)  # a coupling: a bound, not a blank
+    assert r.lower / exact > (0.05 if paired else 0.3)  # projections: weak in R^4, not void
+
+
+def test_a_failing_child_raises_a_named_error(monkeypatch):
+    from kinred.errors import NotConverged
+
+    x, y = _paired(2000)
+    monkeypatch.setattr(sparse_mod, "FORK_EDGES", 0)
+
+    def boom(*args):
+        raise NotConverged("w1(method='sparse'): status 2")
+
+    monkeypatch.setattr(sparse_mod, "_solve", boom)
+    with pytest.raises(NotConverged, match="status 2"):
+        w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=60.0)

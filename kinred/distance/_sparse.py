@@ -95,22 +95,23 @@ def pair_costs(X, Y, i, j, chunk: int = 1 << 18) -> np.ndarray:
 
 
 def _coupling_edges(X, a, Y, b, paired: bool, rng):
-    """Support of one coupling of the full measures: identity or monotone along an axis."""
+    """One coupling of the full measures, identity or monotone along an axis: its support
+    ``(i, j)`` and masses."""
     if paired:
         idx = np.arange(X.shape[0], dtype=np.int64)
-        return idx, idx
+        return idx, idx, a
     pooled = np.concatenate([X, Y])
     pw = np.concatenate([a, b]) / 2.0
     th = _principal_axis(pooled, pw, rng)
-    i, j, _ = monotone_pieces(X @ th, a, Y @ th, b)
-    return i.astype(np.int64), j.astype(np.int64)
+    i, j, mass = monotone_pieces(X @ th, a, Y @ th, b)
+    return i.astype(np.int64), j.astype(np.int64), mass
 
 
 def _initial_keys(X, a, Y, b, k: int, paired: bool, rng) -> np.ndarray:
     n, m = X.shape[0], Y.shape[0]
     if n * m <= _ALL_PAIRS:
         return np.arange(n * m, dtype=np.int64)
-    ci, cj = _coupling_edges(X, a, Y, b, paired, rng)
+    ci, cj, _ = _coupling_edges(X, a, Y, b, paired, rng)
     parts = [ci * m + cj]
     nx = knn(X, Y, k)
     parts.append((np.repeat(np.arange(n, dtype=np.int64), nx.shape[1]) * m) + nx.ravel())
@@ -140,6 +141,59 @@ def _solve(a, b, rows, cols, costs, n, m, num_iter_max):
     keep = G.data > 0
     return (np.asarray(G.row)[keep].astype(np.int64), np.asarray(G.col)[keep].astype(np.int64),
             np.asarray(G.data)[keep], np.asarray(log["u"], float), np.asarray(log["v"], float))
+
+
+#: Candidate graphs from this many edges solve in a forked child when a time budget is set:
+#: the network simplex cannot be interrupted, the child can (below it, solves take < 1 s).
+FORK_EDGES = 500_000
+
+
+class _SolveTimedOut(Exception):
+    """Internal: a network-simplex solve passed the deadline (its child was stopped)."""
+
+
+def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
+    """:func:`_solve`, stopped at ``deadline`` (``time.perf_counter``): in a forked child
+    process when the graph is large (the inputs are inherited, not copied; only the plan and
+    the duals, ``O(n + m)``, come back through a pipe). Raises :class:`_SolveTimedOut`."""
+    import multiprocessing as mp
+    import pickle
+
+    if deadline is None or rows.size < FORK_EDGES or "fork" not in mp.get_all_start_methods():
+        return _solve(a, b, rows, cols, costs, n, m, num_iter_max)
+    left = deadline - time.perf_counter()
+    if left <= 0:
+        raise _SolveTimedOut
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+
+    def child():
+        try:
+            out = ("ok", _solve(a, b, rows, cols, costs, n, m, num_iter_max))
+        except BaseException as exc:  # noqa: BLE001 -- re-raised in the parent
+            out = ("error", exc)
+        send.send_bytes(pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL))
+        send.close()
+
+    proc = ctx.Process(target=child, daemon=True)
+    proc.start()
+    send.close()
+    try:
+        if not recv.poll(left):
+            raise _SolveTimedOut
+        status, out = pickle.loads(recv.recv_bytes())
+    except EOFError:                       # the child died without an answer (e.g. killed)
+        status, out = "error", NotConverged(
+            "w1(method='sparse'): the network-simplex process ended without a result "
+            f"(exit code {proc.exitcode}); lower the atom count or raise the memory limit")
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join()
+        recv.close()
+    if status == "error":
+        raise out
+    return out
 
 
 def _first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
@@ -189,6 +243,26 @@ def _cheap_lower(X, a, Y, b, rng) -> float:
     from ._bracket import projection_lower
 
     return projection_lower(Pts(X, a), Pts(Y, b), rng, n_projections=8, n_refine=5)[0]
+
+
+def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds):
+    """The certified bracket when the budget ran out during solve ``it``: the bounds of the
+    earlier solves, or (first solve) those of :func:`kinred.distance.paired_w1_bracket`
+    (paired atoms: index coupling, 1-D projections; ``O(N log N)``) or of the general bracket
+    (explicit couplings, projections, a sub-sampled dual)."""
+    head = (f"the time budget max_seconds = {max_seconds:g} ran out during network-simplex "
+            f"solve {it} (stopped; ")
+    if it > 1:
+        return lower, upper, head + "the bounds of the earlier solves)"
+    if paired:
+        from ._paired import paired_w1_bracket
+
+        r = paired_w1_bracket(X, Y, a, seed=int(rng.integers(2**32)))
+        return r.lower, r.upper, head + "the paired bracket: index coupling, 1-D projections)"
+    from ._bracket import bracket_atoms
+
+    lo, up, note = bracket_atoms(Pts(X, a), Pts(Y, b), rng)
+    return lo, up, head + note + ")"
 
 
 def price(n: int, m: int, d: int, k: int, edges: int, max_bytes=None) -> None:
@@ -254,37 +328,36 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     X, a = np.ascontiguousarray(P.points[ka]), P.weights[ka]
     Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
     n, m, d = X.shape[0], Y.shape[0], X.shape[1]
-    budget_edges = default_max_edges(n, m, k) if max_edges is None else int(max_edges)
+    budget = _Budget(max_iter, default_max_edges(n, m, k) if max_edges is None
+                     else int(max_edges), max_seconds, max_bytes, t0)
     price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
     tm = {}
     keys = _initial_keys(X, a, Y, b, k, paired, rng)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
-    deadline = None if max_seconds is None else t0 + max_seconds
     tm["graph"] = time.perf_counter() - t0
     tm["solve"] = tm["certify"] = 0.0
-    lower, upper, reason, exact, it = -math.inf, math.inf, "", False, 0
+    lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
     while True:
         it += 1
-        rows, cols = np.divmod(keys, m)
         s = time.perf_counter()
-        costs = pair_costs(X, Y, rows, cols)
-        pr, pc, pm, u, v = _solve(a, b, rows, cols, costs, n, m, num_iter_max)
-        del costs
-        pcost = pair_costs(X, Y, pr, pc)
-        up = math.fsum(pm * pcost)
-        noise = float(np.max(np.abs(pcost - u[pr] - v[pc])))  # the duals' own round-off
+        try:
+            up, u, v, plan, noise = _solve_round(X, a, Y, b, keys, num_iter_max, budget.deadline)
+        except _SolveTimedOut:
+            tm["solve"] += time.perf_counter() - s
+            lower, upper, reason = _timed_out(X, a, Y, b, paired, rng, lower, upper, it,
+                                              max_seconds)
+            break
         tm["solve"] += time.perf_counter() - s
         s = time.perf_counter()
         upper = min(upper, up)
         tiny = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v)))) \
             + 2 * noise
         try:
-            lo, scale, n_open, new = _certify(X, a, Y, b, u, v, (pr, pc, pm), trees, tiny,
-                                              deadline)
+            lo, scale, n_open, new = _certify(X, a, Y, b, u, v, plan, trees, tiny,
+                                              budget.deadline)
         except OutOfTime:
             tm["certify"] += time.perf_counter() - s
-            lower = max(lower, _cheap_lower(X, a, Y, b, rng))
-            scale = upper
+            lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
             reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
                       "certificate (lower bound: the best of the c-transform of an earlier solve"
                       " and 1-D projections)")
@@ -298,24 +371,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         if upper - lower <= tol:
             exact = True
             break
-        elapsed = time.perf_counter() - t0
         merged = np.union1d(keys, new)
-        if merged.size == keys.size:
-            reason = ("no dual constraint of the restricted problem fails beyond round-off "
-                      "(its duals are not accurate enough to close the gap)")
-        elif it >= max_iter:
-            reason = f"the iteration budget max_iter = {max_iter} is spent"
-        elif merged.size > budget_edges:
-            reason = (f"the edge budget max_edges = {budget_edges} is spent (the next graph "
-                      f"has {merged.size} edges)")
-        elif not _fits(n, m, d, k, merged.size, max_bytes):
-            reason = (f"the next graph ({merged.size} edges) would exceed the memory limit "
-                      f"max_bytes (KINRED_MAX_BYTES)")
-        elif max_seconds is not None and elapsed >= max_seconds:
-            reason = f"the time budget max_seconds = {max_seconds:g} is spent ({elapsed:.1f} s"
-            reason += (f"; the certificate's search was cut short for {n_open} atoms, whose "
-                       "c-transform values are the bounds of the regions left open)" if n_open
-                       else ")")
+        reason = budget.stop_reason(keys.size, merged.size, it, n_open, (n, m, d, k))
         if reason:
             break
         keys = merged
@@ -327,6 +384,56 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                          seconds=time.perf_counter() - t0, reason=reason, timings=tm)
 
 
+def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
+    """One solve on the edges ``keys``: the plan's cost, the duals, the plan, and the largest
+    ``|c − u − v|`` on the plan's edges (zero in exact arithmetic: the duals' round-off)."""
+    n, m = X.shape[0], Y.shape[0]
+    rows, cols = np.divmod(keys, m)
+    costs = pair_costs(X, Y, rows, cols)
+    pr, pc, pm, u, v = _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline)
+    del costs, rows, cols
+    pcost = pair_costs(X, Y, pr, pc)
+    noise = float(np.max(np.abs(pcost - u[pr] - v[pc])))
+    return math.fsum(pm * pcost), u, v, (pr, pc, pm), noise
+
+
+@dataclass
+class _Budget:
+    """The column generation's budgets: solves, edges, seconds, bytes."""
+
+    max_iter: int
+    max_edges: int
+    max_seconds: float | None
+    max_bytes: object
+    t0: float
+
+    @property
+    def deadline(self):
+        return None if self.max_seconds is None else self.t0 + self.max_seconds
+
+    def stop_reason(self, size: int, merged: int, it: int, n_open: int, dims) -> str:
+        """Why the next round does not run ("" when it does)."""
+        elapsed = time.perf_counter() - self.t0
+        if merged == size:
+            return ("no dual constraint of the restricted problem fails beyond round-off "
+                    "(its duals are not accurate enough to close the gap)")
+        if it >= self.max_iter:
+            return f"the iteration budget max_iter = {self.max_iter} is spent"
+        if merged > self.max_edges:
+            return (f"the edge budget max_edges = {self.max_edges} is spent (the next graph "
+                    f"has {merged} edges)")
+        if not _fits(*dims, merged, self.max_bytes):
+            return (f"the next graph ({merged} edges) would exceed the memory limit "
+                    f"max_bytes (KINRED_MAX_BYTES)")
+        if self.max_seconds is not None and elapsed >= self.max_seconds:
+            return (f"the time budget max_seconds = {self.max_seconds:g} is spent "
+                    f"({elapsed:.1f} s" + (
+                        f"; the certificate's search was cut short for {n_open} atoms, whose "
+                        "c-transform values are the bounds of the regions left open)"
+                        if n_open else ")"))
+        return ""
+
+
 def describe(o: SparseOutcome, k: int, unit: float) -> str:
     """The note of a ``method="sparse"`` result."""
     head = (f"POT network simplex on a sparse candidate graph ({k} nearest neighbours from "
@@ -336,8 +443,9 @@ def describe(o: SparseOutcome, k: int, unit: float) -> str:
         return (head + "; optimal over all pairs: the c-transform lower bound meets the plan's "
                        "cost to round-off")
     gap = (o.upper - o.lower) / o.upper if o.upper > 0 else 0.0
-    return (head + f"; NOT exact, certified bracket of relative width {gap:.2g} (lower: "
-                   f"c-transform of the duals over all pairs; upper: the plan's cost) because "
+    src = ("" if "network-simplex solve 1 (" in o.reason else
+           " (lower: c-transform of the duals over all pairs; upper: the plan's cost)")
+    return (head + f"; NOT exact, certified bracket of relative width {gap:.2g}{src} because "
                    f"{o.reason}")
 
 

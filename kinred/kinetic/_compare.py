@@ -97,14 +97,28 @@ def _w1_atoms(A, B, wa, wb, *, max_seconds=MAX_W1_SECONDS, seed=0):
     general bracket."""
     from ..distance import w1
 
+    paired = A.shape == B.shape and np.array_equal(wa, wb)
     try:
-        return w1(A, B, method="auto", a=wa, b=wb, max_seconds=max_seconds, seed=seed)
+        r = w1(A, B, method="auto", a=wa, b=wb, max_seconds=max_seconds, seed=seed)
+        return r if r.exact or not paired else _tighter(r, _paired_bracket(A, B, wa, seed))
     except TooLarge as exc:
         if getattr(exc, "result", None) is not None:
             return exc.result
-    if A.shape == B.shape and np.array_equal(wa, wb):
+    if paired:
         return _paired_bracket(A, B, wa, seed)
     return w1(A, B, method="bracket", a=wa, b=wb, seed=seed)
+
+
+def _tighter(r, q):
+    """Both certified brackets hold: their intersection ``[max lower, min upper]``."""
+    import dataclasses
+
+    lo, up = max(r.lower, q.lower), min(r.upper, q.upper)
+    if (lo, up) == (r.lower, r.upper):
+        return r
+    return dataclasses.replace(r, lower=lo, upper=up, value=0.5 * (lo + up),
+                               note=r.note + "; intersected with the paired bracket "
+                                             f"[{q.lower:.6g}, {q.upper:.6g}]")
 
 
 def _paired_bracket(A, B, w, seed):
