@@ -83,11 +83,14 @@ class Scene:
         with ``G = 0.8`` reproduces the paper's §3.4 experiments).
     weights : (N,) array_like, optional
         Probability weights of the agents (validated: finite, >= 0, sum 1); default ``1/N``.
-    pairsum : PairSum or {"fast", "dense", "numpy", "nufft"}, optional
+    pairsum : PairSum or str, optional
         The pair-sum backend (:mod:`kinred.pairsum`): an object implementing
-        :class:`~kinred.pairsum.PairSum`, ``"fast"``/``"dense"`` (default) for
-        :class:`~kinred.pairsum.Dense` (exact, blocked BLAS/numba) or ``"numpy"`` for the
-        plain-numpy twin :class:`~kinred.pairsum.Numpy` (reference and tests).
+        :class:`~kinred.pairsum.PairSum`, or a name of the registry
+        :data:`kinred.pairsum.PAIRSUMS` (the names scene files accept too): ``"fast"``/
+        ``"dense"`` (default) for :class:`~kinred.pairsum.Dense` (exact, blocked BLAS/numba),
+        ``"numpy"`` for the plain-numpy twin :class:`~kinred.pairsum.Numpy` (reference and
+        tests), ``"auto"``, ``"nufft"``, ``"cells"``, ``"random_batch"``, and any backend
+        added with :func:`kinred.pairsum.register_pairsum`.
     block : int, optional
         ``Dense(block=...)``: rows per strip (default: strips of about 64k pairwise entries).
     engine : {"fast", "dense", "numpy"}, optional
