@@ -69,6 +69,41 @@ def test_compare_beyond_the_dense_lp_is_sparse_exact_or_a_certified_bracket(monk
     np.testing.assert_allclose(br.w1, 0.5 * (br.lower + br.upper), rtol=1e-15)
 
 
+def test_a_first_solve_stopped_by_the_budget_sends_later_times_to_the_paired_bracket(
+        monkeypatch):
+    """When the sparse method's first solve at one saved time is stopped by ``max_seconds``
+    (no plan, a bracket), the later times take the paired bracket without the same wait; the
+    brackets stay certified around the exact values."""
+    import time
+
+    import kinred.distance._sparse as sparse_mod
+    from kinred.distance import w1
+
+    d = 6
+    sc = Scene([Alignment(CuckerSmale(G=1.0, beta=0.5))])
+    sol = solve(sc, _mu(d), atoms=40, t_span=(0.0, 1.5), dt=0.05, save_every=10)
+    red = reduce(sol, M=jl_matrix(2, d, seed=0))
+    exact = compare(sol, red)
+    monkeypatch.setitem(w1.__kwdefaults__, "max_dense_bytes", 0)     # no dense LP
+    monkeypatch.setitem(w1.__kwdefaults__, "max_exact_pairs", 10)    # nor a lazy one
+    monkeypatch.setattr(sparse_mod, "FORK_EDGES", 0)                 # every solve forked
+    calls = []
+
+    def slow(*args):
+        calls.append(1)                                              # (in the child: no effect)
+        time.sleep(600)
+
+    monkeypatch.setattr(sparse_mod, "_solve", slow)
+    t0 = time.perf_counter()
+    c = compare(sol, red, max_seconds=1.0)
+    took = time.perf_counter() - t0
+    assert len(c.t) == 4 and not c.exact[1:].any()
+    assert took < 15.0           # one stopped solve (~1 s; t = 0 is two equal clouds), not four
+    assert c.method == "sparse+paired-bracket"
+    assert np.all(c.lower <= exact.w1 * (1 + 1e-12) + 1e-300)
+    assert np.all(exact.w1 <= c.upper * (1 + 1e-12))
+
+
 def test_free_transport_closed_form():
     d = 4
     X0 = np.random.default_rng(0).normal(size=(7, 2 * d))
