@@ -68,6 +68,8 @@ class CTree:
     def __init__(self, Y: np.ndarray):
         n, d = Y.shape
         self.order = _morton_order(Y)
+        self.rank = np.empty_like(self.order)           # rank[order[p]] = p
+        self.rank[self.order] = np.arange(n)
         self.Ys = np.ascontiguousarray(Y[self.order])
         h = 0
         while (n >> (h + 1)) >= _LEAF // 2 and (n >> (h + 1)) >= 1 and h < 40:
@@ -123,9 +125,7 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
     from ._kernels import ctransform_tree
 
     f = np.array(best, dtype=np.float64)
-    inv = np.empty_like(tree.order)
-    inv[tree.order] = np.arange(tree.order.size)
-    jp = inv[jbest].astype(np.int64)
+    jp = tree.rank[jbest].astype(np.int64)
     vs = np.ascontiguousarray(v[tree.order])
     vmax = tree.node_vmax(v)
     scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(X))) + float(np.max(np.abs(v)))

@@ -179,7 +179,8 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
     T = len(solution.t)
     w = solution.weights
     paired = solution.x.shape[1] > max_pot_atoms
-    if paired and not np.array_equal(w, reduced.weights):
+    same_weights = bool(np.array_equal(w, reduced.weights))
+    if paired and not same_weights:
         raise InvalidInput("solution and reduced must carry the same atom weights (use "
                            "reduce(solution, ...)); the paired bracket couples atom i with atom i")
     vals, ex, lo, hi, cpl, uni = (np.empty(T) for _ in range(6))
@@ -189,7 +190,7 @@ def compare(solution: KineticSolution, reduced: ReducedSolution, *,
         Mx, Mv = P.apply(solution.x[i]), P.apply(solution.v[i])
         A = np.concatenate([Mx, Mv], axis=1)
         B = np.concatenate([reduced.y[i], reduced.w[i]], axis=1)
-        if paired or (stopped and np.array_equal(w, reduced.weights)):
+        if paired or (stopped and same_weights):
             r = _paired_bracket(A, B, w, seed=member_seed(seed, i))
         else:
             r = _w1_atoms(A, B, w, reduced.weights, max_seconds=max_seconds,
