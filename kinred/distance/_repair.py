@@ -1,0 +1,178 @@
+r"""Repair of a sparse network-simplex solution over all pairs (:mod:`kinred.distance._sparse`).
+
+The network simplex on a candidate graph returns a plan ``π`` that is optimal *on the graph*
+and potentials ``u, v`` that are one of many optimal duals of the restricted problem -- when
+the plan is degenerate (paired atoms: ``n`` positive entries instead of ``2n − 1``) the
+restricted duals are far from unique, and the c-transform of an arbitrary choice can leave a
+gap although the plan is already optimal over all pairs. Adding the violated pairs and solving
+again (column generation) then only draws another arbitrary dual.
+
+:func:`repair` instead corrects the potentials in place by shortest paths on the residual
+graph of ``π`` over *all* pairs (:func:`kinred.distance._repair_kernels.repair_plan`): the
+largest potentials below the given ones that are feasible for every pair and tight on the
+plan's support. If the plan is not optimal over all pairs, the same search meets a cycle of
+negative length and moves mass around it (cycle cancelling), so the plan improves too. The
+result is checked by the certificate (the c-transform over all pairs), never trusted.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._search import CTree, ctransform
+
+__all__ = ["repair", "RepairOutcome"]
+
+#: Work budget of one repair (queue steps) per atom.
+WORK_PER_ATOM = 20
+
+#: Room for the edges that cycle cancelling adds, per atom.
+NEW_EDGES_PER_ATOM = 1.0
+
+
+@dataclass
+class RepairOutcome:
+    """What :func:`repair` returned: the plan ``(rows, cols, mass)``, ``u``, ``v``, the kernel's
+    status (0: the potentials converged, feasible and tight up to ``tiny``; 1: the work budget
+    or the deadline stopped it; 2: no room for new edges), the queue steps, the cycles
+    cancelled and the seconds of the first (parallel) search."""
+
+    plan: tuple
+    u: np.ndarray
+    v: np.ndarray
+    status: int
+    work: int
+    cycles: int
+    search_seconds: float
+
+    @property
+    def converged(self) -> bool:
+        return self.status == 0
+
+
+def tighten(X, Y, u, v, plan, keys, tol: float):
+    """Potentials recomputed exactly tight along a spanning forest of the candidate graph's
+    nearly tight edges (``|c − u − v| ≤ tol``; the plan's edges first): a network simplex's
+    potentials carry the round-off of its pivots (about ``1e-11`` on 10⁶ atoms), the
+    forest's are exact up to one rounding per edge along a path. Values at the forest's roots
+    (one per component) are kept. Returns new ``u, v``."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import breadth_first_order, connected_components, \
+        minimum_spanning_tree
+
+    from ._repair_kernels import propagate_tight
+    from ._sparse import pair_costs
+
+    n, m = X.shape[0], Y.shape[0]
+    pr, pc, _ = plan
+    rows, cols = np.divmod(keys, m)
+    rc = np.abs(pair_costs(X, Y, rows, cols) - u[rows] - v[cols])
+    near = rc <= tol
+    w = np.concatenate([np.full(pr.size, 1e-300), np.maximum(rc[near], 1e-280) + 1e-280])
+    r = np.concatenate([pr, rows[near]])
+    c = np.concatenate([pc, cols[near]]) + n
+    G = coo_array((w, (r, c)), shape=(n + m + 1, n + m + 1)).tocsr()   # repeats: summed, tiny
+    T = minimum_spanning_tree(G)
+    ncomp, label = connected_components(T, directed=False)
+    roots = np.unique(label[:n + m], return_index=True)[1]
+    T = (T + T.T).tocoo()
+    R = coo_array((np.ones(roots.size), (np.full(roots.size, n + m), roots)),
+                  shape=(n + m + 1, n + m + 1))
+    order, pred = breadth_first_order((T + R + R.T).tocsr(), n + m, directed=False)
+    pred = np.where(pred == n + m, -1, pred)
+    u, v = np.array(u, float), np.array(v, float)
+    propagate_tight(order[1:].astype(np.int64), pred.astype(np.int64), n,
+                    np.ascontiguousarray(X), np.ascontiguousarray(Y), u, v)
+    return u, v
+
+
+def _violating_columns(X, Y, u, v, plan, tree: CTree, tiny: float) -> np.ndarray:
+    """Columns ``j`` with some ``|xᵢ − yⱼ| − uᵢ < vⱼ − tiny`` (in parallel, exact search)."""
+    from ._sparse import _first_per, pair_costs
+
+    pr, pc, _ = plan
+    c = pair_costs(X, Y, pr, pc)
+    g0, i0 = _first_per(pc, Y.shape[0], c - u[pr], pr)
+    _, _, cand = ctransform(Y, X, u, g0, i0, tree, thr=v - tiny, m=1)
+    return np.nonzero(cand[:, 0] >= 0)[0]
+
+
+def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = None,
+           max_new_edges: int | None = None, deadline: float | None = None) -> RepairOutcome:
+    """Potentials feasible over all pairs and tight on the plan (and the plan itself improved
+    by cycle cancelling), starting from ``u, v``; ``tree`` is a :class:`CTree` of ``X``."""
+    from ._repair_kernels import repair_plan
+
+    n, m = X.shape[0], Y.shape[0]
+    pr, pc, pm = plan
+    t0 = time.perf_counter()
+    start = _violating_columns(X, Y, u, v, plan, tree, tiny)
+    t_search = time.perf_counter() - t0
+    if start.size == 0:
+        return RepairOutcome(plan, u, v, 0, 0, 0, t_search)
+    extra = int(max_new_edges if max_new_edges is not None
+                else max(1024, NEW_EDGES_PER_ATOM * (n + m)))
+    cap = pr.size + extra
+    erow = np.empty(cap, np.int64)
+    ecol = np.empty(cap, np.int64)
+    emass = np.zeros(cap)
+    erow[:pr.size] = tree.rank[pr]
+    ecol[:pr.size] = pc
+    emass[:pr.size] = pm
+    head = np.full(n, -1, np.int64)
+    nxt = np.full(cap, -1, np.int64)
+    _link(erow, head, nxt, pr.size)
+    us = np.ascontiguousarray(u[tree.order], dtype=np.float64)
+    v = np.array(v, dtype=np.float64)
+    umax = tree.node_vmax(u)
+    scale = float(np.max(np.abs(tree.Ys))) + float(np.max(np.abs(Y))) + float(np.max(np.abs(u)))
+    slack = 16 * np.finfo(np.float64).eps * scale
+    budget = int(max_work if max_work is not None else WORK_PER_ATOM * (n + m))
+    queue = np.empty(n + m, np.int64)
+    queue[:start.size] = n + start
+    inq = np.zeros(n + m, np.uint8)
+    inq[n + start] = 1
+    qs = np.array([0, start.size % (n + m), start.size, 0], np.int64)
+    pred_x, pred_y = np.full(n, -1, np.int64), np.full(m, -1, np.int64)
+    rows = np.empty(n, np.int64)
+    Yc = np.ascontiguousarray(Y, dtype=np.float64)
+    ne, status, work, cycles = pr.size, 1, 0, 0
+    chunk = max(10_000, (n + m) // 4)
+    while status == 1 and work < budget:
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+        ne, status, w, c = repair_plan(
+            tree.Ys, Yc, us, v, tree.lo, tree.hi, umax, tree.first_leaf, tree.starts, erow,
+            ecol, emass, ne, head, nxt, queue, inq, qs, pred_x, pred_y, rows, float(tiny),
+            slack, min(chunk, budget - work))
+        work += w
+        cycles += c
+    keep = emass[:ne] > 0
+    u_new = np.empty(n)
+    u_new[tree.order] = us
+    new_plan = (tree.order[erow[:ne][keep]], ecol[:ne][keep], emass[:ne][keep])
+    return RepairOutcome(new_plan, u_new, v, int(status), int(work), int(cycles), t_search)
+
+
+def _link(erow, head, nxt, ne):
+    """Each row's list of plan edges (``head[p]``, then ``nxt[e]``), ``O(edges)``."""
+    order = np.argsort(erow[:ne], kind="stable")
+    rows = erow[:ne][order]
+    first = np.ones(ne, bool)
+    first[1:] = rows[1:] != rows[:-1]
+    nxt[order[:-1]] = np.where(first[1:], -1, order[1:])
+    if ne:
+        nxt[order[-1]] = -1
+    head[rows[first]] = order[first]
+
+
+def plan_cost(X, Y, plan) -> float:
+    """``Σ πᵢⱼ |xᵢ − yⱼ|`` (exact summation)."""
+    from ._sparse import pair_costs
+
+    pr, pc, pm = plan
+    return math.fsum(pm * pair_costs(X, Y, pr, pc))
