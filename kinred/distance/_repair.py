@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._costs import first_per, pair_costs
 from ._search import CTree, ctransform
 
 __all__ = ["repair", "RepairOutcome"]
@@ -65,8 +66,6 @@ def tighten(X, Y, u, v, plan, keys, tol: float):
         minimum_spanning_tree
 
     from ._repair_kernels import propagate_tight
-    from ._sparse import pair_costs
-
     n, m = X.shape[0], Y.shape[0]
     pr, pc, _ = plan
     rows, cols = np.divmod(keys, m)
@@ -92,11 +91,9 @@ def tighten(X, Y, u, v, plan, keys, tol: float):
 
 def _violating_columns(X, Y, u, v, plan, tree: CTree, tiny: float) -> np.ndarray:
     """Columns ``j`` with some ``|xᵢ − yⱼ| − uᵢ < vⱼ − tiny`` (in parallel, exact search)."""
-    from ._sparse import _first_per, pair_costs
-
     pr, pc, _ = plan
     c = pair_costs(X, Y, pr, pc)
-    g0, i0 = _first_per(pc, Y.shape[0], c - u[pr], pr)
+    g0, i0 = first_per(pc, Y.shape[0], c - u[pr], pr)
     _, _, cand = ctransform(Y, X, u, g0, i0, tree, thr=v - tiny, m=1)
     return np.nonzero(cand[:, 0] >= 0)[0]
 
@@ -172,7 +169,5 @@ def _link(erow, head, nxt, ne):
 
 def plan_cost(X, Y, plan) -> float:
     """``Σ πᵢⱼ |xᵢ − yⱼ|`` (exact summation)."""
-    from ._sparse import pair_costs
-
     pr, pc, pm = plan
     return math.fsum(pm * pair_costs(X, Y, pr, pc))

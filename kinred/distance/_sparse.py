@@ -42,6 +42,7 @@ from ..errors import NotConverged
 from ._bracket import _principal_axis
 from ._inputs import Pts
 from ._oned import monotone_pieces
+from ._costs import first_per, pair_costs, sorted_unique
 from ._search import CTree, OutOfTime, ctransform, knn, use_tree
 
 __all__ = ["SparseOutcome", "sparse_w1", "BYTES_PER_EDGE", "DEFAULT_K", "DEFAULT_RTOL"]
@@ -85,27 +86,6 @@ class SparseOutcome:
     timings: dict = field(default_factory=dict)
     #: the time budget stopped the first network-simplex solve (the bracket is not the dual's)
     first_solve_stopped: bool = False
-
-
-def pair_costs(X, Y, i, j, chunk: int = 1 << 18) -> np.ndarray:
-    """``|X[i] − Y[j]|`` from coordinate differences (as ``cdist``), in chunks."""
-    out = np.empty(i.size)
-    for s in range(0, i.size, chunk):
-        D = X[i[s:s + chunk]] - Y[j[s:s + chunk]]
-        out[s:s + chunk] = np.sqrt(np.einsum("ij,ij->i", D, D))
-    return out
-
-
-def sorted_unique(keys: np.ndarray) -> np.ndarray:
-    """The sorted distinct values of an integer array (``np.unique``'s result by one sort:
-    numpy 2.4's ``np.unique`` hashes integers and takes 25x longer on 10⁷ keys)."""
-    s = np.sort(keys)
-    if s.size < 2:
-        return s
-    keep = np.empty(s.size, bool)
-    keep[0] = True
-    np.not_equal(s[1:], s[:-1], out=keep[1:])
-    return s[keep]
 
 
 def _coupling_edges(X, a, Y, b, paired: bool, rng):
@@ -210,19 +190,6 @@ def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
     return out
 
 
-def _first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
-    """Per group (0..n-1, every group present): the minimum of ``vals`` and its ``other``."""
-    order = np.lexsort((vals, group))
-    g = group[order]
-    first = np.ones(g.size, bool)
-    first[1:] = g[1:] != g[:-1]
-    best = np.full(n, np.inf)
-    arg = np.zeros(n, np.int64)
-    best[g[first]] = vals[order][first]
-    arg[g[first]] = other[order][first]
-    return best, arg
-
-
 def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None, second=True):
     """Exact c-transforms ``f = v^c`` (over all ``j``) and ``g = f^c`` (over all ``i``; with
     ``second=False``, ``g = v``: potentials repaired over all pairs need no second pass), the
@@ -236,14 +203,14 @@ def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None, second=True):
     c = pair_costs(X, Y, pr, pc)
     rows_x = None if trees[0] is None else trees[0].order
     rows_y = None if trees[1] is None else trees[1].order
-    f0, j0 = _first_per(pr, n, c - v[pc], pc)
+    f0, j0 = first_per(pr, n, c - v[pc], pc)
     open_f, open_g = np.zeros(n, np.int8), np.zeros(m, np.int8)
     f, _, cf = ctransform(X, Y, v, f0, j0, trees[1], deadline=deadline, open_rows=open_f,
                           thr=u - tiny, m=VIOLATORS_PER_ROW, rows=rows_x)
     if not second:                               # g = v: f + v ≤ c holds by f's definition
         g, cg = v, np.full((m, 1), -1, np.int64)
     else:
-        g0, i0 = _first_per(pc, m, c - f[pr], pr)
+        g0, i0 = first_per(pc, m, c - f[pr], pr)
         g, _, cg = ctransform(Y, X, f, g0, i0, trees[0], deadline=deadline,
                               open_rows=open_g, thr=v - tiny, m=VIOLATORS_PER_ROW, rows=rows_y)
     lower = math.fsum(a * f) + math.fsum(b * g)
