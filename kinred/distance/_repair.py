@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._costs import first_per, pair_costs
+from ._costs import first_per, pair_costs, sorted_unique
 from ._search import CTree, ctransform
 
 __all__ = ["repair", "RepairOutcome"]
@@ -99,15 +99,20 @@ def _violating_columns(X, Y, u, v, plan, tree: CTree, tiny: float) -> np.ndarray
 
 
 def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = None,
-           max_new_edges: int | None = None, deadline: float | None = None) -> RepairOutcome:
+           max_new_edges: int | None = None, deadline: float | None = None,
+           start: np.ndarray | None = None) -> RepairOutcome:
     """Potentials feasible over all pairs and tight on the plan (and the plan itself improved
-    by cycle cancelling), starting from ``u, v``; ``tree`` is a :class:`CTree` of ``X``."""
+    by cycle cancelling), starting from ``u, v``; ``tree`` is a :class:`CTree` of ``X``.
+    ``start``: the columns to search first -- for every pair violated by ``u, v`` beyond
+    ``tiny``, its column or, for its row, the column of the row's minimum of ``c − v`` (by
+    default found by one parallel search over all pairs)."""
     from ._repair_kernels import repair_plan
 
     n, m = X.shape[0], Y.shape[0]
     pr, pc, pm = plan
     t0 = time.perf_counter()
-    start = _violating_columns(X, Y, u, v, plan, tree, tiny)
+    if start is None:
+        start = _violating_columns(X, Y, u, v, plan, tree, tiny)
     t_search = time.perf_counter() - t0
     if start.size == 0:
         return RepairOutcome(plan, u, v, 0, 0, 0, t_search)
@@ -171,3 +176,81 @@ def plan_cost(X, Y, plan) -> float:
     """``Σ πᵢⱼ |xᵢ − yⱼ|`` (exact summation)."""
     pr, pc, pm = plan
     return math.fsum(pm * pair_costs(X, Y, pr, pc))
+
+
+def _restricted_ctransform(X, Y, v, cols, f):
+    """``min(fᵢ, min over j in cols of (|xᵢ − yⱼ| − vⱼ))`` for every row (exact; a tree over
+    the few ``cols`` only: rows whose bound already beats every node stop at the root)."""
+    if cols.size == 0:
+        return f
+    sub = CTree(np.ascontiguousarray(Y[cols]))
+    out, _ = ctransform(X, Y[cols], v[cols], np.array(f, float),
+                        np.zeros(X.shape[0], np.int64), sub)
+    return np.minimum(out, f)
+
+
+def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, tiny, noise, deadline, tm,
+                     violators: int):
+    """One round's certificate with the repair (tree searches; ``trees`` of ``X`` and ``Y``).
+
+    1. ``u, v`` rebuilt tight (:func:`tighten`); 2. ``f = v^c`` over all pairs (one parallel
+    pass; ``L₀ = Σ a f + Σ b v`` is already a lower bound) with the violators of every row;
+    3. if rows are violated, :func:`repair` from the columns of their minima; if it converged,
+    the certificate of the repaired ``v′`` costs one restricted pass: ``f′ = min(f, min over
+    the changed columns J of (c − v′))`` satisfies ``f′ᵢ + v′ⱼ ≤ cᵢⱼ`` for every pair (``v′ = v``
+    off ``J``), so ``L = Σ a f′ + Σ b v′`` is proved without a second full pass.
+
+    Returns ``(upper, lower, scale, open rows, new candidate keys, noise)``: the best plan's
+    cost, the lower bound, the size of the dual sum, rows the deadline cut short, the
+    violators and repaired plan's edges for column generation, the potentials' round-off on
+    the plan."""
+    import math as _m
+
+    n, m = X.shape[0], Y.shape[0]
+    s = time.perf_counter()
+    u, v = tighten(X, Y, u, v, plan, keys, 1e3 * noise + tiny)
+    tiny0 = max(tiny - 2 * noise, 0.0)
+    tm["tighten"] = tm.get("tighten", 0.0) + time.perf_counter() - s
+    s = time.perf_counter()
+    pr, pc, _ = plan
+    f0, j0 = first_per(pr, n, pair_costs(X, Y, pr, pc) - v[pc], pc)
+    open_f = np.zeros(n, np.int8)
+    f, jf, cand = ctransform(X, Y, v, f0, j0, trees[1], deadline=deadline, open_rows=open_f,
+                             thr=u - tiny0, m=violators, rows=trees[0].order)
+    ri, qi = np.nonzero(cand >= 0)
+    new = ri.astype(np.int64) * m + cand[ri, qi]
+    upper = plan_cost(X, Y, plan)
+    lower = _m.fsum(a * f) + _m.fsum(b * v)
+    tm["certify"] = tm.get("certify", 0.0) + time.perf_counter() - s
+    bad = f < u - tiny0
+    n_open = int(open_f.sum())
+    if not bad.any() or n_open:
+        return upper, lower, _scale(a, f, b, v), n_open, new, _noise(X, Y, u, v, plan)
+    s = time.perf_counter()
+    r = repair(X, Y, u, v, plan, trees[0], tiny0, deadline=deadline,
+               start=sorted_unique(jf[bad]))
+    tm["repair"] = tm.get("repair", 0.0) + time.perf_counter() - s
+    tm["repair_cycles"] = tm.get("repair_cycles", 0) + r.cycles
+    tm["repair_work"] = tm.get("repair_work", 0) + r.work
+    rp, rc, _ = r.plan
+    new = np.concatenate([new, rp * m + rc])
+    upper = min(upper, plan_cost(X, Y, r.plan))
+    if not r.converged:
+        return upper, lower, _scale(a, f, b, v), 0, new, _noise(X, Y, u, v, plan)
+    s = time.perf_counter()
+    f2 = _restricted_ctransform(X, Y, r.v, np.nonzero(r.v != v)[0], f)
+    lower = max(lower, _m.fsum(a * f2) + _m.fsum(b * r.v))
+    tm["certify"] += time.perf_counter() - s
+    return upper, lower, _scale(a, f2, b, r.v), 0, new, _noise(X, Y, r.u, r.v, r.plan)
+
+
+def _scale(a, f, b, g) -> float:
+    """``Σ aᵢ|fᵢ − t| + Σ bⱼ|gⱼ + t|`` (``t`` the median of ``f``): the size of the dual sum."""
+    t = float(np.median(f))
+    return math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))
+
+
+def _noise(X, Y, u, v, plan) -> float:
+    """``max |c − u − v|`` over the plan's edges (zero in exact arithmetic)."""
+    pr, pc, _ = plan
+    return float(np.max(np.abs(pair_costs(X, Y, pr, pc) - u[pr] - v[pc])))

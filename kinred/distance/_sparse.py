@@ -42,6 +42,7 @@ from ..errors import NotConverged
 from ._bracket import _principal_axis
 from ._inputs import Pts
 from ._oned import monotone_pieces
+from ._repair import certify_repaired
 from ._costs import first_per, pair_costs, sorted_unique
 from ._search import CTree, OutOfTime, ctransform, knn, use_tree
 
@@ -190,9 +191,8 @@ def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
     return out
 
 
-def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None, second=True):
-    """Exact c-transforms ``f = v^c`` (over all ``j``) and ``g = f^c`` (over all ``i``; with
-    ``second=False``, ``g = v``: potentials repaired over all pairs need no second pass), the
+def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None):
+    """Exact c-transforms ``f = v^c`` (over all ``j``) and ``g = f^c`` (over all ``i``), the
     lower bound ``Σ a f + Σ b g`` (exact summation), the size of that sum, the number of rows
     whose search the deadline cut short (their ``f``/``g`` are lower bounds of the minima, so
     ``f + g ≤ c`` still holds for every pair), and the keys of the violated pairs the searches
@@ -207,12 +207,9 @@ def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None, second=True):
     open_f, open_g = np.zeros(n, np.int8), np.zeros(m, np.int8)
     f, _, cf = ctransform(X, Y, v, f0, j0, trees[1], deadline=deadline, open_rows=open_f,
                           thr=u - tiny, m=VIOLATORS_PER_ROW, rows=rows_x)
-    if not second:                               # g = v: f + v ≤ c holds by f's definition
-        g, cg = v, np.full((m, 1), -1, np.int64)
-    else:
-        g0, i0 = first_per(pc, m, c - f[pr], pr)
-        g, _, cg = ctransform(Y, X, f, g0, i0, trees[0], deadline=deadline,
-                              open_rows=open_g, thr=v - tiny, m=VIOLATORS_PER_ROW, rows=rows_y)
+    g0, i0 = first_per(pc, m, c - f[pr], pr)
+    g, _, cg = ctransform(Y, X, f, g0, i0, trees[0], deadline=deadline, open_rows=open_g,
+                          thr=v - tiny, m=VIOLATORS_PER_ROW, rows=rows_y)
     lower = math.fsum(a * f) + math.fsum(b * g)
     t = float(np.median(f))
     scale = math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))
@@ -339,16 +336,16 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         upper = min(upper, up)
         tiny = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v)))) \
             + 2 * noise
-        repaired = False
-        if trees[0] is not None:
-            up, u, v, plan, noise, extra, repaired = _repaired(
-                X, Y, u, v, plan, keys, trees[0], tiny, noise, budget.deadline, tm)
-            upper = min(upper, up)
-            keys = sorted_unique(np.concatenate([keys, extra])) if extra.size else keys
-        s = time.perf_counter()
         try:
-            lo, scale, n_open, new = _certify(X, a, Y, b, u, v, plan, trees, tiny,
-                                              budget.deadline, second=not repaired)
+            if trees[0] is not None:
+                up, lo, scale, n_open, new, noise = certify_repaired(
+                    X, a, Y, b, u, v, plan, keys, trees, tiny, noise, budget.deadline, tm,
+                    VIOLATORS_PER_ROW)
+                upper = min(upper, up)
+            else:
+                lo, scale, n_open, new = _certify(X, a, Y, b, u, v, plan, trees, tiny,
+                                                  budget.deadline)
+                tm["certify"] += time.perf_counter() - s
         except OutOfTime:
             tm["certify"] += time.perf_counter() - s
             lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
@@ -358,7 +355,6 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
             break
         if n_open:
             lo = max(lo, _cheap_lower(X, a, Y, b, rng))
-        tm["certify"] += time.perf_counter() - s
         lower = max(lower, lo)
         tol = ((rtol if rtol is not None else DEFAULT_RTOL) * upper + 16 * _EPS * scale
                + min(4 * noise, MAX_NOISE_RTOL * upper))
@@ -377,32 +373,6 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                          iterations=it, edges=int(keys.size),
                          seconds=time.perf_counter() - t0, reason=reason, timings=tm,
                          first_solve_stopped=stopped_first)
-
-
-def _repaired(X, Y, u, v, plan, keys, tree, tiny, noise, deadline, tm):
-    """:func:`kinred.distance._repair.repair` of a solve: when its potentials converged, the
-    repaired plan's cost and edges and the repaired potentials replace the solve's; otherwise
-    the solve's potentials stay (the repaired plan's cost still bounds W1, its new edges join
-    the graph). Returns ``(cost, u, v, plan, noise, new edge keys, converged)``."""
-    from ._repair import plan_cost, repair, tighten
-
-    s = time.perf_counter()
-    u, v = tighten(X, Y, u, v, plan, keys, 1e3 * noise + tiny)
-    tm["tighten"] = tm.get("tighten", 0.0) + time.perf_counter() - s
-    s = time.perf_counter()
-    r = repair(X, Y, u, v, plan, tree, tiny - 2 * noise, deadline=deadline)
-    tm["repair"] = tm.get("repair", 0.0) + time.perf_counter() - s
-    tm["repair_cycles"] = tm.get("repair_cycles", 0) + r.cycles
-    tm["repair_work"] = tm.get("repair_work", 0) + r.work
-    tm["repair_search"] = tm.get("repair_search", 0.0) + r.search_seconds
-    m = Y.shape[0]
-    pr, pc, pm = r.plan
-    extra = sorted_unique(pr * m + pc)
-    if r.converged:
-        u, v, plan = r.u, r.v, r.plan
-    pcost = pair_costs(X, Y, plan[0], plan[1])
-    noise = float(np.max(np.abs(pcost - u[plan[0]] - v[plan[1]])))
-    return plan_cost(X, Y, r.plan), u, v, plan, noise, extra, r.converged
 
 
 def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
