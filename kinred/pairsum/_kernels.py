@@ -639,7 +639,8 @@ def pair_strips(strips, diff, YT, Y, nrm, R, tau, esrc, elast, ekind, epar, ez, 
                 Ys = Y[s]
                 Rs = R[s]
                 _nb_gemm(-2.0, Ys[i0:i1], False, Ys[i0:], True, 0.0, q)
-                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau, 0)
+                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau,
+                                np.int64(0))
             for e in range(ne):
                 if esrc[e] != s:
                     continue
