@@ -217,9 +217,15 @@ def test_run_and_member_index_reject_bad_input(tmp_path):
 # ----------------------------------------------------------------------------------------------
 # The study end to end (tiny sizes)
 # ----------------------------------------------------------------------------------------------
-def test_smoke_run_writes_its_outputs(tmp_path):
-    cfg = CalibrationConfig(**TINY)
-    res = cal.run(cfg, out_dir=tmp_path, executor="serial", progress=False)
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """The TINY study, run once for the tests that read it: ``(result, its folder)``."""
+    out = tmp_path_factory.mktemp("calibration")
+    return cal.run(CalibrationConfig(**TINY), out_dir=out, executor="serial", progress=False), out
+
+
+def test_smoke_run_writes_its_outputs(tiny_run):
+    res, tmp_path = tiny_run
     assert {"calibration.json", "calibration.txt", "summary.json", "calibration.png"} <= \
         {p.name for p in tmp_path.iterdir()}
     data = json.loads((tmp_path / "calibration.json").read_text())
@@ -240,10 +246,9 @@ def test_smoke_run_writes_its_outputs(tmp_path):
     assert text == res.to_text() and f"sum K={K0:g} (G={K0 / 20:g}) seed {S0} *" in text
 
 
-def test_todays_candidate_reruns_table1s_first_projections_exactly():
+def test_todays_candidate_reruns_table1s_first_projections_exactly(tiny_run):
     # common random numbers: projection r of (beta, k) is Table 1's projection r of (beta, k)
-    cfg = CalibrationConfig(**TINY)
-    res = cal.run(cfg, executor="serial", progress=False)
+    res = tiny_run[0]
     d = res.default_index
     t1 = table1.run(table1.Table1Config(N=20, steps=100, ks=(25, 10), betas=(1.5, 1.7),
                                         G=K0 / 20, data_seed=S0, record_every=50),

@@ -1,5 +1,6 @@
-"""Every script of examples/ runs in its smoke mode and prints its expected lines, and is a
-sphinx-gallery script (the documentation renders them as a gallery, tests/test_docs.py)."""
+"""Every script of examples/ runs in its smoke mode, prints its expected lines and draws its
+figure, and is a sphinx-gallery script (the documentation renders them as a gallery,
+tests/test_docs.py, whose build does not run them again)."""
 
 from __future__ import annotations
 
@@ -67,7 +68,10 @@ def test_every_example_is_covered():
 
 
 def _run(script, args, cwd, *, smoke_variable=False):
-    env = dict(os.environ, PYTHONHASHSEED="0", MPLBACKEND="Agg")
+    # Agg, and the figures open at the end saved into cwd (tests/_example_figures.py)
+    path = os.pathsep.join(p for p in (str(ROOT / "tests"), os.environ.get("PYTHONPATH")) if p)
+    env = dict(os.environ, PYTHONHASHSEED="0", MPLBACKEND="module://_example_figures",
+               PYTHONPATH=path)
     env.pop("KINRED_EXAMPLES_SMOKE", None)
     if smoke_variable:
         env["KINRED_EXAMPLES_SMOKE"] = "1"
@@ -98,6 +102,11 @@ def test_example_smoke(script, tmp_path):
     for pattern in EXPECTED[script]:
         assert re.search(pattern, proc.stdout, re.MULTILINE), \
             f"{script}: no line matching {pattern!r} in\n{proc.stdout}"
+    # the figure the gallery shows under the code (a PNG over 5 kB, as the gallery page had)
+    figures = sorted(tmp_path.glob("figure_*.png"))
+    assert figures, f"{script}: no matplotlib figure open at the end of the script"
+    png = figures[0].read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 5_000, f"{script}: no figure drawn"
 
 
 def test_gallery_variable_selects_the_smoke_sizes(tmp_path):

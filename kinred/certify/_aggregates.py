@@ -239,14 +239,14 @@ def pair_pass(pts: dict, c: np.ndarray, terms, bz: dict, bs: dict, margin: float
 class _Strips:
     """The compiled pass's inputs, built once per pass: the point sets' geometry, stacked
     (``YT (S, k, N)`` transposed rows for ``k ≤ 3``; else ``Yc (S, N, k)`` centred rows,
-    ``nrm (S, N)`` their squared norms and ``R`` the raw rows, a tuple), the per-term arrays
+    ``nrm (S, N)`` their squared norms and ``R (S, N, k)`` the raw rows), the per-term arrays
     and, per carrier, ``Z = [c z̃, c]`` (``(C, N, k+1)``) and the centred ``z̃``."""
 
     diff: bool
     YT: np.ndarray
     Yc: np.ndarray
     nrm: np.ndarray
-    R: tuple
+    R: np.ndarray
     sets: np.ndarray       # (T, 3): run, true and carrier point-set indices of each term
     kind: np.ndarray
     par: np.ndarray        # (T, 5)
@@ -279,9 +279,14 @@ def _prepare(pts, c, fast, bz, bs, ws) -> _Strips:
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     names = sorted({nm for t in fast for nm in _names(t)})
-    raw = tuple(np.ascontiguousarray(pts[nm], dtype=float) for nm in names)
+    # one C-contiguous stack of the raw rows (not a tuple, whose length, and not a
+    # non-contiguous layout, would each compile another specialization of the pass)
+    raw = _buf(ws, "raw", (len(names), n, k))
+    for s_, nm in enumerate(names):
+        raw[s_] = pts[nm]
     diff = k <= _SMALL_K
-    YT = np.stack([Y.T for Y in raw]) if diff else np.empty((len(names), 0, 0))
+    YT = (np.ascontiguousarray(raw.transpose(0, 2, 1)) if diff
+          else np.empty((len(names), 0, 0)))
     Yc = _buf(ws, "Yc", (len(names), n, k) if not diff else (len(names), 0, 0))
     nrm = _buf(ws, "nrm", (len(names), n) if not diff else (len(names), 0))
     for s_, Y in enumerate(raw if not diff else ()):

@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from ..pairsum.strips import compiled_blocks
@@ -314,7 +315,7 @@ def _accumulate(i, jstart, c, pos, bz, bs, V0, V1, V2, V3, V4, V5, V6,
 def pass_strips(strips, diff, YT, Yc, nrm, R, tau, sets, tkind, tpar, tbz, tbs, tcz, c, pos,
                 margin, rnd, Z, acc, outs, qbuf, phbuf, buf, scr):  # pragma: no cover - compiled
     # strips (S, 2); point sets s: YT[s] (k, N) if diff else Yc[s] (N, k) centred, nrm[s],
-    # R[s] raw (a tuple); per term t: sets[t] = (run, true, carrier) point-set indices, kind,
+    # R[s] raw (S, N, k); per term t: sets[t] = (run, true, carrier) point-set indices, kind,
     # params, bz/bs rows, carrier index tcz; Z (C, N, k+1), acc (C, N, k+1) zeroed here;
     # outs (T, 9, N) with outs[:, 6] = inf; qbuf (point sets, >= maxel), phbuf (>= maxel)
     N = c.shape[0]
@@ -333,10 +334,11 @@ def pass_strips(strips, diff, YT, Yc, nrm, R, tau, sets, tkind, tpar, tbz, tbs, 
             else:
                 Rs = R[s]
                 _nb_gemm(-2.0, Yc[s, i0:i1], False, Yc[s, i0:], True, 0.0, q)
-                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau, 0)
+                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau,
+                                np.int64(0))
         ph = phbuf[: bb * m].reshape((bb, m))
         for cz in range(Z.shape[0]):
-            add = 0
+            add = np.int64(0)       # a literal 0 would compile a second strip_term
             for t in range(nt):
                 if tcz[t] != cz:
                     continue
@@ -344,7 +346,7 @@ def pass_strips(strips, diff, YT, Yc, nrm, R, tau, sets, tkind, tpar, tbz, tbs, 
                            qbuf[sets[t, 1], : bb * m].reshape((bb, m)),
                            qbuf[sets[t, 2], : bb * m].reshape((bb, m)), c, pos, tbz[t], tbs[t],
                            tkind[t], tpar[t], margin, rnd, outs[t], buf, scr, ph, add)
-                add = 1
+                add = np.int64(1)
             square_fill(ph)
             _nb_gemm(1.0, ph, False, Z[cz, i0:], False, 1.0, acc[cz, i0:i1])
             if i1 < N:

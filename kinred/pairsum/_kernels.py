@@ -53,7 +53,8 @@ import collections
 import threading
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from .. import _parallel
 
@@ -581,15 +582,25 @@ def pow_row32(q, G, beta, scr):  # pragma: no cover - compiled
     return q
 
 
+def _pow_row(q, G, beta, scr):  # pragma: no cover - compiled callers only
+    """:func:`pow_row64` or :func:`pow_row32` by the dtype of ``q``, chosen when a caller is
+    compiled (a branch on ``q.itemsize`` would compile both, one for the wrong dtype)."""
+    raise NotImplementedError("_pow_row is only callable from compiled code")
+
+
+@overload(_pow_row)
+def _ol_pow_row(q, G, beta, scr):  # pragma: no cover - compiled
+    if q.dtype == types.float64:
+        return lambda q, G, beta, scr: pow_row64(q, G, beta, scr)
+    return lambda q, G, beta, scr: pow_row32(q, G, beta, scr)
+
+
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
 def cs_pow(Q, G, beta, scr):  # pragma: no cover - compiled
     """``Q ← G (1 + Q)^(−β)`` in place, row by row (:func:`pow_row64` / :func:`pow_row32`
     by dtype). Twin: :func:`cs_numpy`."""
     for a in range(Q.shape[0]):
-        if Q.itemsize == 8:
-            pow_row64(Q[a], G, beta, scr)
-        else:
-            pow_row32(Q[a], G, beta, scr)
+        _pow_row(Q[a], G, beta, scr)
     return Q
 
 
@@ -603,10 +614,7 @@ def _kernel_rows(kind, a, b, T, scr, one):  # pragma: no cover - compiled
             _cs_row(row, row, a, n2 // 2, n2 % 2, one)
     else:
         for r in range(T.shape[0]):
-            if T.itemsize == 8:
-                pow_row64(T[r], a, b, scr)
-            else:
-                pow_row32(T[r], a, b, scr)
+            _pow_row(T[r], a, b, scr)
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
@@ -639,7 +647,8 @@ def pair_strips(strips, diff, YT, Y, nrm, R, tau, esrc, elast, ekind, epar, ez, 
                 Ys = Y[s]
                 Rs = R[s]
                 _nb_gemm(-2.0, Ys[i0:i1], False, Ys[i0:], True, 0.0, q)
-                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau, 0)
+                sqdist_gram_fix(q, nrm[s, i0:i1], nrm[s, i0:], Rs[i0:i1], Rs[i0:], tau,
+                                np.int64(0))
             for e in range(ne):
                 if esrc[e] != s:
                     continue
