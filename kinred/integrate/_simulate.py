@@ -24,9 +24,9 @@ from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
 from ._observers import Progress, as_observers, state_view, working_frame
 from ._registry import SOLVERS, method_name
-from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
-                    save_points)
-from ._solvers import VectorField
+from ._save import (FUSED_MIN, Recorder, SaveAt, SaveGrid, check_save_size, observable_list,
+                    save_grid, save_points)
+from ._solvers import EulerMoments, ExplicitRK, VectorField
 
 __all__ = ["simulate", "Trajectory"]
 
@@ -175,6 +175,7 @@ class _Run:
     dt: float
     state: tuple
     shift: np.ndarray | None
+    fused: Any = None       # EulerMoments: the step that gives the moments too, or None
 
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
@@ -318,14 +319,18 @@ def _loop(r: _Run) -> int:
         lands = False
         while not lands:
             h, t_end, lands = control.propose(t, n, times[j], target_n)
-            new, err, new_ss = solver.step(f, t, state, h, ss, rng)
+            if r.fused is not None:         # Euler and the moments in one pass
+                new, known = r.fused(f, t, state, h, ss, rng)
+                err, new_ss = None, ss
+            else:
+                (new, err, new_ss), known = solver.step(f, t, state, h, ss, rng), None
             if not control.judge(t, state, new, err):
                 lands = False
                 continue
             t, state, ss, n = t_end, new, new_ss, n + 1
-            moments = r.check(t, n, *state)
+            moments = r.check(t, n, *state, known)
             if lands:
-                r.record(j, times[j], *state, moments)
+                r.record(j, times[j], *state, moments, known)
             if r.observers:
                 _notify(r, t, n, h, state)
             control.accepted(t, solver, ss)
@@ -406,5 +411,9 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
                             x0, v0, w)
+    fused = None
+    if (type(solver) is ExplicitRK and solver.table.stages == 1 and solver.table.E is None
+            and not controller.adaptive and x0.size >= FUSED_MIN):
+        fused = EulerMoments(w, record.moments[0], check.moments)
     return _Run(scene, method, solver, control, VectorField(scene), rng, grid, record, check,
-                observers, t0, t1, dt, (x, v), shift)
+                observers, t0, t1, dt, (x, v), shift, fused)
