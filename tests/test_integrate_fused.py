@@ -3,6 +3,8 @@ moments of the new state (the guard's ``Γ``, the recorded ``Γ`` and ``Λ``, th
 test) from one compiled pass per step, against its numpy twin, against the unfused loop, and
 the number of passes a run makes."""
 
+import tracemalloc
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,9 +13,11 @@ from hypothesis import strategies as st
 from kinred.dynamics import (Aggregation, Alignment, CuckerSmale, Scene, get_num_threads,
                              set_num_threads)
 from kinred.dynamics.kernels import Quadratic
-from kinred.integrate import SaveAt, simulate
+import kinred.observables as obs
+from kinred.integrate import SaveAt, simulate, working_frame
 from kinred.integrate import _kernels, _simulate
 from kinred.integrate._kernels import Moments
+from kinred.integrate._observers import FRAME_MIN
 from kinred.integrate._save import FUSED_MIN
 from kinred.integrate._solvers import EulerMoments, _RKState
 from kinred.pairsum import RandomBatch
@@ -180,14 +184,17 @@ def test_fused_run_is_the_unfused_run(order, monkeypatch):
 
 
 def test_a_step_is_one_pass_over_the_state(monkeypatch):
-    """One fused call per step and no sweep of its own: the run's only sweeps are the initial
-    state's Γ and Λ (today's main: 2 sweeps per step and 3 at t0, 23 for 10 steps, beside the
-    Euler update and a sum of x per step)."""
+    """One fused call per step and no sweep of its own: the run's only sweeps are those of the
+    initial centroid (two: x0 is far from 0), which give Λ(x0) too, and Γ(v0) (today's main:
+    2 sweeps per step and 3 at t0, 23 for 10 steps, beside the Euler update and a sum of x
+    per step)."""
     calls = []
 
     def spy(name):
         real = getattr(_kernels, name)
         monkeypatch.setattr(_kernels, name, lambda *a: calls.append(name) or real(*a))
+    sc, x0, v0 = _large()
+    simulate(sc, x0, v0, (0.0, 1e-3), 1e-3, seed=1)       # numba loads its registries first
     for name in ("sweep", "euler_pair", "euler_one", "euler_sweep", "euler_sweep_v",
                  "euler_sweep_one"):
         spy(name)
@@ -195,10 +202,9 @@ def test_a_step_is_one_pass_over_the_state(monkeypatch):
     real_sum = np.sum
     monkeypatch.setattr(np, "sum", lambda a, *k, **kw: sums.append(np.shape(a)) or
                         real_sum(a, *k, **kw))
-    sc, x0, v0 = _large()
     tr = simulate(sc, x0, v0, (0.0, 10e-3), 1e-3, seed=1)
     assert tr.n_steps == 10
-    assert sorted(calls) == ["euler_sweep_v"] * 10 + ["sweep"] * 2
+    assert sorted(calls) == ["euler_sweep_v"] * 10 + ["sweep"] * 3
     assert x0.shape not in sums                 # no separate sum of a state array
 
 
@@ -210,3 +216,75 @@ def test_observers_see_the_working_positions_at_the_last_step():
     assert np.array_equal(seen[-1], tr.x[-1])
     ref = simulate(sc, x0, v0, (0.0, 3e-3), 1e-3, seed=1, save=SaveAt(states=True))
     assert np.array_equal(ref.x[-1], tr.x[-1])
+
+
+# ------------------------------------------------------------------ the run's fixed costs
+
+@pytest.mark.parametrize("offset", [0.0, 0.5, 1e6])
+def test_frame_centres_as_kinred_observables(offset):
+    """The compiled working frame: the compensated centroid to round-off of the spread, and
+    the copy relative to it, bit for bit numpy's ``x0 - shift``."""
+    rng = np.random.default_rng(4)
+    n, d = 3000, 90
+    x0 = offset + rng.uniform(-1, 1, (n, d))
+    w = rng.dirichlet(np.ones(n))
+    x, c, m = _kernels.frame(x0, w)
+    ref = obs.centre(x0, w)
+    assert np.max(np.abs(c - ref)) <= 4 * np.finfo(float).eps * (1.0 + offset)
+    assert np.array_equal(x, x0 - c) and x.flags.c_contiguous and not np.shares_memory(x, x0)
+    assert np.allclose(m, _kernels.moments_numpy(x0, w), rtol=1e-12, atol=0)
+
+
+def test_working_frame_at_large_n_is_the_small_n_frame():
+    sc, x0, v0 = _large()
+    x0 = x0 + 1e3
+    w = sc.agent_weights(len(x0))
+    assert x0.size >= FRAME_MIN
+    x, v, shift = working_frame(sc, x0, v0)
+    assert np.max(np.abs(shift - obs.centre(x0, w))) <= 1e-15 * 1e3
+    assert np.array_equal(x, x0 - shift) and np.array_equal(v, v0)
+    assert not np.shares_memory(x, x0) and not np.shares_memory(v, v0)
+
+
+def test_the_run_checks_its_state_once_and_the_frame_holds_two_arrays(monkeypatch):
+    """Today's main tested the finiteness of x0 five times per run (``simulate``'s validation,
+    working_frame's, kinred.observables.centre's) by ``np.isfinite`` temporaries; now once per
+    array. The working frame allocates its two arrays and nothing else."""
+    from kinred import _validate
+
+    seen = []
+    real = _validate._all_finite
+    monkeypatch.setattr(_validate, "_all_finite", lambda a: seen.append(a.shape) or real(a))
+    sc, x0, v0 = _large()
+    x, v, shift = working_frame(sc, x0, v0)       # compile
+    tracemalloc.start()
+    try:
+        seen.clear()
+        working_frame(sc, x0, v0)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert seen == [x0.shape, x0.shape]
+    assert peak / x0.nbytes < 2.1, peak / x0.nbytes             # x and v, nothing else
+    seen.clear()
+    simulate(sc, x0, v0, (0.0, 1e-3), 1e-3, seed=1)
+    assert seen.count(x0.shape) == 2
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, "inf-inf", "overflow"])
+def test_finiteness_check_of_large_arrays(bad):
+    from kinred._validate import as_array
+    from kinred.errors import InvalidInput
+
+    z = np.ones((300, 300))
+    if bad == "inf-inf":
+        z[3, 4], z[200, 1] = np.inf, -np.inf
+    elif bad == "overflow":             # finite entries whose sum overflows: accepted
+        z[:] = 1e308
+    else:
+        z[77, 5] = bad
+    if bad == "overflow":
+        assert as_array(z, "x0") is z
+        return
+    with pytest.raises(InvalidInput, match=r"x0 must be finite, got .* at index \((3, 4|77, 5)\)"):
+        as_array(z, "x0")

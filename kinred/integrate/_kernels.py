@@ -58,7 +58,8 @@ from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "state_moments", "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
+           "euler_moments_numpy", "shifted_copy", "frame", "state_moments", "Moments", "BLOCK",
+           "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
 #: reductions); NaN and Inf still propagate.
@@ -279,6 +280,15 @@ def euler_sweep_one(x, dx, h, w, shift, c, r, acc):  # pragma: no cover - compil
             _flush(0, blk, part, r, acc)
 
 
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def shifted_copy(z, shift, out):  # pragma: no cover - compiled
+    """``out = z − shift`` element by element (numpy's ``z - shift``, bit for bit)."""
+    n, d = z.shape
+    for i in range(n):
+        for j in range(d):
+            out[i, j] = z[i, j] - shift[j]
+
+
 def _pool() -> ThreadPoolExecutor:
     """The one worker thread that takes the second half of the rows (made anew in a forked
     process, where the parent's thread does not exist)."""
@@ -403,6 +413,20 @@ def euler_moments_numpy(x, dx, v, dv, h, w, shift, tmp) -> tuple:
     euler_numpy(x, dx, v, dv, h, tmp)
     mx = tuple(float(a) for a in moments_numpy(x, w, shift))
     return mx, (None if v is None else tuple(float(a) for a in moments_numpy(v, w)))
+
+
+def frame(z, w) -> tuple:
+    """``(z − c, c, (F, S, T))``: a fresh copy of ``z (N, d)`` relative to its weighted
+    centroid ``c``, the reference centre that :func:`moments` leaves from 0 (compensated when
+    the centroid is far from 0, as :func:`kinred.observables.centre`; one or two sweeps, no
+    ``(N, d)`` temporary), the copy written by :func:`shifted_copy` (one pass), and the
+    moments of ``z`` that came with ``c``."""
+    n, d = z.shape
+    c, m = np.zeros(d), np.empty(3)
+    moments(z, w, np.zeros(d), c, m)
+    out = np.empty((n, d))
+    shifted_copy(z, c, out)
+    return out, c, (float(m[0]), float(m[1]), float(m[2]))
 
 
 def euler(x, dx, v, dv, h) -> None:

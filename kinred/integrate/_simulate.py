@@ -22,7 +22,7 @@ from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
-from ._observers import Progress, as_observers, state_view, working_frame
+from ._observers import Progress, as_observers, frame_of, state_view
 from ._registry import SOLVERS, method_name
 from ._save import (FUSED_MIN, Recorder, SaveAt, SaveGrid, check_save_size, observable_list,
                     save_grid, save_points)
@@ -176,6 +176,7 @@ class _Run:
     state: tuple
     shift: np.ndarray | None
     fused: Any = None       # EulerMoments: the step that gives the moments too, or None
+    known0: Any = None      # the moments (of x0, None) the working frame gave, or None
 
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
@@ -310,7 +311,7 @@ def _loop(r: _Run) -> int:
     t, n, state = r.t0, 0, r.state
     f, rng, solver, control = r.f, r.rng, r.solver, r.control
     ss = solver.init(f, t, state, r.dt)
-    r.record(0, t, *state, r.check.initial_moments(state[1]))
+    r.record(0, t, *state, r.check.initial_moments(state[1]), r.known0)
     if r.observers:
         _notify(r, t, 0, 0.0, state, initial=True)
     times, steps = r.grid
@@ -407,7 +408,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 
-    x, v, shift = working_frame(scene, x0, v0)
+    x, v, shift, x_moments = frame_of(scene, x0, v0, w)      # x0, v0 validated above
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
                             x0, v0, w)
@@ -416,4 +417,5 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
             and not controller.adaptive and x0.size >= FUSED_MIN):
         fused = EulerMoments(w, record.moments[0], check.moments)
     return _Run(scene, method, solver, control, VectorField(scene), rng, grid, record, check,
-                observers, t0, t1, dt, (x, v), shift, fused)
+                observers, t0, t1, dt, (x, v), shift, fused,
+                None if x_moments is None else (x_moments, None))
