@@ -288,3 +288,11 @@ def test_finiteness_check_of_large_arrays(bad):
         return
     with pytest.raises(InvalidInput, match=r"x0 must be finite, got .* at index \((3, 4|77, 5)\)"):
         as_array(z, "x0")
+
+
+def test_add_shift_is_numpys_add_bit_for_bit():
+    rng = np.random.default_rng(6)
+    x, s = rng.normal(size=(4100, 256)) * 1e3, rng.normal(size=256) * 1e6
+    ref = x + s
+    _kernels.add_shift(x, s)
+    assert np.array_equal(x, ref)

@@ -29,6 +29,12 @@ Kernels
     only. :func:`euler_moments` runs them over two row halves and finishes the moments as
     :func:`moments` does. Twin: :func:`euler_moments_numpy`.
 
+``shifted_copy(z, shift, out)``
+    ``out = z − shift`` element by element (numpy's rounding). The run's fixed costs use it:
+    :func:`frame` centres the initial positions (the centroid from :func:`moments`' sweeps,
+    no temporary; one writing pass), :func:`add_shift` shifts the final positions back in
+    place (``x − (−shift)``, numpy's ``x + shift`` bit for bit).
+
 :func:`moments` ``(z, w, shift, c, out)`` joins the sweeps of two row halves into
 ``out = [F, S, T]``: the fluctuation ``F = Σᵢ wᵢ‖aᵢ − a_c‖²`` (``Γ`` or ``Λ`` of §3.4.1), the
 second moment ``S = Σᵢ wᵢ‖aᵢ‖²`` and the plain sum ``T`` (non-finite iff a coordinate is, or
@@ -58,7 +64,7 @@ from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "shifted_copy", "frame", "state_moments", "Moments", "BLOCK",
+           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "state_moments", "Moments", "BLOCK",
            "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
@@ -427,6 +433,13 @@ def frame(z, w) -> tuple:
     out = np.empty((n, d))
     shifted_copy(z, c, out)
     return out, c, (float(m[0]), float(m[1]), float(m[2]))
+
+
+def add_shift(x, shift) -> None:
+    """``x ← x + shift`` in place (numpy's ``np.add(x, shift)``, bit for bit: the kernel
+    :func:`shifted_copy` subtracts ``−shift``) over the row ranges of :func:`_halves`."""
+    neg = -np.asarray(shift, dtype=float)
+    _each(lambda i0, i1: shifted_copy(x[i0:i1], neg, x[i0:i1]), _halves(*x.shape))
 
 
 def euler(x, dx, v, dv, h) -> None:

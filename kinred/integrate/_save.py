@@ -18,7 +18,7 @@ import numpy as np
 from .. import observables as _obs
 from .._validate import _short, as_array, as_int, check_alloc, fmt_count
 from ..errors import InvalidInput
-from ._kernels import Moments
+from ._kernels import Moments, add_shift
 
 __all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_save_size"]
 
@@ -295,7 +295,11 @@ class Recorder:
         """``(x, v, t_states)``: the recorded states and their times (the save times), or,
         when none were requested, the final state ``(1, N, d)`` at ``times[-1]``."""
         if self.pending is not None:
-            self.final[0][0] += self.pending          # np.add(x, shift)'s rounding, in place
+            x = self.final[0][0]
+            if x.ndim == 2 and x.dtype == np.float64 and x.flags.writeable:
+                add_shift(x, self.pending)      # np.add(x, shift)'s rounding, in place
+            else:
+                x += self.pending
             self.pending = None
         if self.final is not None:
             return self.final[0], self.final[1], np.asarray(times[-1:], dtype=float)
