@@ -64,8 +64,8 @@ from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "state_moments", "Moments", "BLOCK",
-           "RECENTRE", "SPLIT_MIN"]
+           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "state_moments",
+           "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
 #: reductions); NaN and Inf still propagate.
