@@ -296,3 +296,22 @@ def test_add_shift_is_numpys_add_bit_for_bit():
     ref = x + s
     _kernels.add_shift(x, s)
     assert np.array_equal(x, ref)
+
+
+def test_the_fused_pass_feeds_the_divergence_guard():
+    """An unstable step at large N is stopped from the fused pass's moments as from the
+    unfused loop's: the same step, the same message."""
+    from kinred.errors import SimulationDiverged
+
+    sc = Scene([Alignment(CuckerSmale(1.0, 0.0))], "sum")       # sum: rate N·G, dt·ρ >> 2
+    _, x0, v0 = _large()
+    errs = []
+    for fused_min in (FUSED_MIN, 2**62):
+        _simulate.FUSED_MIN = fused_min
+        try:
+            with pytest.raises(SimulationDiverged) as exc:
+                simulate(sc, x0, v0, (0.0, 0.5), 0.01)
+        finally:
+            _simulate.FUSED_MIN = FUSED_MIN
+        errs.append(exc.value)
+    assert errs[0].step == errs[1].step and str(errs[0]) == str(errs[1])
