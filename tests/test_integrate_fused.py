@@ -185,9 +185,9 @@ def test_fused_run_is_the_unfused_run(order, monkeypatch):
 
 def test_a_step_is_one_pass_over_the_state(monkeypatch):
     """One fused call per step and no sweep of its own: the run's only sweeps are those of the
-    initial centroid (two: x0 is far from 0), which give Λ(x0) too, and Γ(v0) (today's main:
-    2 sweeps per step and 3 at t0, 23 for 10 steps, beside the Euler update and a sum of x
-    per step)."""
+    initial centroid (two: x0 is far from 0), which give Λ(x0) too, and Γ(v0) comes with the
+    copy of v0 (today's main: 2 sweeps per step and 3 at t0, 23 for 10 steps, beside the
+    Euler update and a sum of x per step)."""
     calls = []
 
     def spy(name):
@@ -196,7 +196,7 @@ def test_a_step_is_one_pass_over_the_state(monkeypatch):
     sc, x0, v0 = _large()
     simulate(sc, x0, v0, (0.0, 1e-3), 1e-3, seed=1)       # numba loads its registries first
     for name in ("sweep", "euler_pair", "euler_one", "euler_sweep", "euler_sweep_v",
-                 "euler_sweep_one"):
+                 "euler_sweep_one", "copy_sweep"):
         spy(name)
     sums = []
     real_sum = np.sum
@@ -204,7 +204,7 @@ def test_a_step_is_one_pass_over_the_state(monkeypatch):
                         real_sum(a, *k, **kw))
     tr = simulate(sc, x0, v0, (0.0, 10e-3), 1e-3, seed=1)
     assert tr.n_steps == 10
-    assert sorted(calls) == ["euler_sweep_v"] * 10 + ["sweep"] * 3
+    assert sorted(calls) == ["copy_sweep"] + ["euler_sweep_v"] * 10 + ["sweep"] * 2
     assert x0.shape not in sums                 # no separate sum of a state array
 
 
@@ -315,3 +315,14 @@ def test_the_fused_pass_feeds_the_divergence_guard():
             _simulate.FUSED_MIN = FUSED_MIN
         errs.append(exc.value)
     assert errs[0].step == errs[1].step and str(errs[0]) == str(errs[1])
+
+
+@pytest.mark.parametrize("mean", [0.0, 1e4])
+def test_copy_moments_is_a_copy_and_the_moments(mean):
+    """The velocities' copy and Γ(v0) in one pass (two sweeps when the mean is far from 0)."""
+    rng = np.random.default_rng(9)
+    v0, w = mean + rng.normal(size=(3000, 90)), rng.dirichlet(np.ones(3000))
+    v, m, c = _kernels.copy_moments(v0, w)
+    assert np.array_equal(v, v0) and not np.shares_memory(v, v0)
+    _close(m, _kernels.moments_numpy(v0, w), v0)
+    assert np.allclose(c, w @ v0, rtol=1e-12, atol=1e-12)

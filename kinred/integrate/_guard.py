@@ -440,13 +440,20 @@ class DivergenceCheck:
         The initial state as given (the hint's first state).
     w : (N,) ndarray
         Agent weights.
+    v0_moments : ((F, S, T), (d,) ndarray), optional
+        The moments of ``v0`` and their reference centre when already known
+        (:func:`._kernels.copy_moments`); None: measured here.
     """
 
-    def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w):
+    def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w, v0_moments=None):
         self.scene, self.table, self.method, self.dt = scene, table, method, dt
         self.n_steps, self.t0, self.x0, self.v0 = n_steps, t0, x0, v0
         self.moments = Moments(w)           # the compiled moments of v, step after step
-        self.guard = Guard(scene, v0, w, t0, self.moments) if scene.order == 2 else None
+        measure = self.moments
+        if v0_moments is not None:
+            self.moments.centre = v0_moments[1]
+            measure = lambda v: v0_moments[0]       # noqa: E731 - taken with the copy of v0
+        self.guard = Guard(scene, v0, w, t0, measure) if scene.order == 2 else None
 
     def __call__(self, t, step, x, v, known=None):
         """Raise :class:`~kinred.errors.SimulationDiverged` if the state at ``t`` diverged;

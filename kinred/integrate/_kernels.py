@@ -64,7 +64,8 @@ from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "state_moments",
+           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "copy_sweep",
+           "copy_moments", "state_moments",
            "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
@@ -295,6 +296,41 @@ def shifted_copy(z, shift, out):  # pragma: no cover - compiled
             out[i, j] = z[i, j] - shift[j]
 
 
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def copy_sweep(z, w, c, r, acc, out):  # pragma: no cover - compiled
+    """``out = z`` (a copy) and, in the same pass, the sums of :func:`sweep` of ``z`` (no
+    shift) about ``c`` into ``r, acc``."""
+    n, d = z.shape
+    blk = np.zeros(d)
+    part = np.zeros(4)
+    r[:] = 0.0
+    acc[:] = 0.0
+    for i in range(n):
+        wi = w[i]
+        rc = 0.0
+        rs = 0.0
+        rt = 0.0
+        for j in range(d):
+            a = z[i, j]
+            out[i, j] = a
+            e = a - c[j]
+            blk[j] += wi * e
+            rc += e * e
+            rs += a * a
+            rt += a
+        part[0] += wi * rc
+        part[1] += wi * rs
+        part[2] += rt
+        part[3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            for j in range(d):
+                r[j] += blk[j]
+                blk[j] = 0.0
+            for k in range(4):
+                acc[k] += part[k]
+                part[k] = 0.0
+
+
 def _pool() -> ThreadPoolExecutor:
     """The one worker thread that takes the second half of the rows (made anew in a forked
     process, where the parent's thread does not exist)."""
@@ -433,6 +469,19 @@ def frame(z, w) -> tuple:
     out = np.empty((n, d))
     shifted_copy(z, c, out)
     return out, c, (float(m[0]), float(m[1]), float(m[2]))
+
+
+def copy_moments(z, w) -> tuple:
+    """``(copy of z, (F, S, T), c)``: a fresh copy of ``z (N, d)`` and its moments of
+    :func:`moments` about the reference centre ``c`` (from 0, updated to the mean), from one
+    pass (:func:`copy_sweep`; a second sweep when the mean is far from 0)."""
+    n, d = z.shape
+    out, c = np.empty((n, d)), np.zeros(d)
+    r, acc = np.empty(d), np.empty(4)
+    copy_sweep(z, w, c, r, acc, out)
+    with np.errstate(all="ignore"):
+        m = _finish(out, w, np.zeros(d), c, r, acc)
+    return out, m, c
 
 
 def add_shift(x, shift) -> None:

@@ -125,16 +125,26 @@ FRAME_MIN = 2 ** 18
 
 
 def frame_of(scene, x0, v0, w) -> tuple:
-    """``(x, v, shift, moments)``: :func:`working_frame` of a validated state ``(x0, v0)``
-    with agent weights ``w``, and the moments ``(F, S, T)`` of ``x0``
-    (:func:`._kernels.state_moments`) when the compiled frame gave them (else None)."""
-    v = v0.copy() if v0 is not None else None
-    if x0.size < FRAME_MIN or x0.ndim != 2 or not scene.translation_invariant:
+    """``(x, v, shift, (mx, mv))``: :func:`working_frame` of a validated state ``(x0, v0)``
+    with agent weights ``w``, and what the compiled passes gave besides (else None): the
+    moments ``mx`` of ``x0`` (:func:`._kernels.state_moments`) and ``mv = (moments of v0,
+    reference centre)`` (:func:`._kernels.copy_moments`: the copy and ``Γ(v0)`` in one
+    pass)."""
+    mx = mv = None
+    large = x0.size >= FRAME_MIN and x0.ndim == 2
+    if v0 is None:
+        v = None
+    elif large:
+        v, m, c = _kernels.copy_moments(v0, w)
+        mv = (m, c)
+    else:
+        v = v0.copy()
+    if not large or not scene.translation_invariant:
         shift = _obs.centre(x0, w) if scene.translation_invariant else None
         x = x0 - shift if shift is not None else x0.copy()
-        return x, v, shift, None
-    x, shift, moments = _kernels.frame(x0, w)
-    return x, v, shift, moments
+    else:
+        x, shift, mx = _kernels.frame(x0, w)
+    return x, v, shift, (mx, mv)
 
 
 def _readonly(a):

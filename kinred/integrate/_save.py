@@ -269,8 +269,8 @@ class Recorder:
         for name, k in self.fused:
             if k == 1 and v_moments is None:
                 v_moments = self.moments[1](v)
-            val = (v_moments[0] if k == 1 else known[0][0] if known is not None else
-                   self.moments[0](x)[0])
+            val = (v_moments[0] if k == 1 else known[0][0] if known is not None and
+                   known[0] is not None else self.moments[0](x)[0])
             self.rec[name].append(np.asarray(val, dtype=float))
         xt = x
         if self.shift is not None and (self.plain or self.X is not None):

@@ -176,7 +176,7 @@ class _Run:
     state: tuple
     shift: np.ndarray | None
     fused: Any = None       # EulerMoments: the step that gives the moments too, or None
-    known0: Any = None      # the moments (of x0, None) the working frame gave, or None
+    known0: Any = None      # the moments (of x0, of v0) the working frame gave (or None)
 
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
@@ -408,14 +408,14 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 
-    x, v, shift, x_moments = frame_of(scene, x0, v0, w)      # x0, v0 validated above
+    x, v, shift, (x_moments, v_moments) = frame_of(scene, x0, v0, w)   # x0, v0 validated
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
-                            x0, v0, w)
+                            x0, v0, w, v_moments)
     fused = None
     if (type(solver) is ExplicitRK and solver.table.stages == 1 and solver.table.E is None
             and not controller.adaptive and x0.size >= FUSED_MIN):
         fused = EulerMoments(w, record.moments[0], check.moments)
     return _Run(scene, method, solver, control, VectorField(scene), rng, grid, record, check,
                 observers, t0, t1, dt, (x, v), shift, fused,
-                None if x_moments is None else (x_moments, None))
+                (x_moments, None if v_moments is None else v_moments[0]))
