@@ -51,6 +51,17 @@ def _short(value) -> str:
     return r if len(r) <= 80 else r[:77] + "..."
 
 
+def _all_finite(arr: np.ndarray) -> bool:
+    """No NaN or Inf in ``arr``. A large float array is first summed (one pass, no
+    temporary): a NaN or an Inf makes the sum non-finite, so a finite sum clears it; a
+    non-finite one (or an overflow) is settled element by element."""
+    if arr.size >= 2 ** 16 and arr.dtype.kind in "fc":
+        with np.errstate(all="ignore"):
+            if np.isfinite(np.add.reduce(arr, axis=None)):
+                return True
+    return bool(np.all(np.isfinite(arr)))
+
+
 def as_array(
     value,
     name: str,
@@ -85,7 +96,7 @@ def as_array(
         ):
             want = "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
             raise InvalidInput(f"{name} must have shape {want}, got {arr.shape}")
-    if finite and arr.size and not np.all(np.isfinite(arr)):
+    if finite and arr.size and not _all_finite(arr):
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise InvalidInput(
             f"{name} must be finite, got {arr[tuple(bad)]} at index {tuple(int(b) for b in bad)}"

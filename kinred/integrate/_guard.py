@@ -163,10 +163,14 @@ class Guard:
     w : (N,) ndarray
         Agent weights.
     t0 : float
+    moments : Moments, optional
+        The run's moments of ``v``, step after step (:class:`._kernels.Moments`); the moments
+        of ``v0`` are taken with it (attribute ``m0``).
     """
 
-    def __init__(self, scene, v0, w, t0):
+    def __init__(self, scene, v0, w, t0, moments=None):
         self.budget = energy_budget(scene, *v0.shape)
+        self.m0 = None
         self.active = self.budget is not None
         if not self.active:
             return
@@ -177,7 +181,9 @@ class Guard:
         self.cstar = b.p / (2.0 * b.kappa) if b.kappa > 0 else 0.0
         self.lo = math.inf
         self.anchor = (t0, 0.0)
-        self.q0 = self._q(v0)[0]
+        # the moments of v0 (by the run's Moments when given: its centre is then the mean)
+        self.m0 = moments(v0) if moments is not None else state_moments(v0, w)
+        self.q0 = self._q(v0, self.m0)[0]
         self.qmax = self.q0
         if not math.isfinite(self.q0):
             # velocities so large that their squares overflow float64 (|v| ~ 1e154 and up):
@@ -434,21 +440,34 @@ class DivergenceCheck:
         The initial state as given (the hint's first state).
     w : (N,) ndarray
         Agent weights.
+    v0_moments : ((F, S, T), (d,) ndarray), optional
+        The moments of ``v0`` and their reference centre when already known
+        (:func:`._kernels.copy_moments`); None: measured here.
     """
 
-    def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w):
+    def __init__(self, scene, table, method, dt, n_steps, t0, x0, v0, w, v0_moments=None):
         self.scene, self.table, self.method, self.dt = scene, table, method, dt
         self.n_steps, self.t0, self.x0, self.v0 = n_steps, t0, x0, v0
         self.moments = Moments(w)           # the compiled moments of v, step after step
-        self.guard = Guard(scene, v0, w, t0) if scene.order == 2 else None
+        measure = self.moments
+        if v0_moments is not None:
+            self.moments.centre = v0_moments[1]
+            measure = lambda v: v0_moments[0]       # noqa: E731 - taken with the copy of v0
+        self.guard = Guard(scene, v0, w, t0, measure) if scene.order == 2 else None
 
-    def __call__(self, t, step, x, v):
+    def __call__(self, t, step, x, v, known=None):
         """Raise :class:`~kinred.errors.SimulationDiverged` if the state at ``t`` diverged;
         returns the moments ``(Γ, Σwᵢ|vᵢ|², Σvᵢⱼ)`` of ``v`` (:func:`.state_moments`) when the
-        guard measured them, else None."""
+        guard measured them, else None. ``known``: the moments ``(of x, of v)`` of the state
+        when the step gave them (:class:`._solvers.EulerMoments`): no pass of its own."""
         active = self.guard is not None and self.guard.active
-        m = self.moments(v) if active else None
-        s = float(np.sum(x)) + (m[2] if active else float(np.sum(v)) if v is not None else 0.0)
+        if known is not None:
+            m = known[1] if active else None
+            s = known[0][2] + (known[1][2] if known[1] is not None else 0.0)
+        else:
+            m = self.moments(v) if active else None
+            s = float(np.sum(x)) + (m[2] if active else float(np.sum(v)) if v is not None
+                                    else 0.0)
         if not math.isfinite(s):
             self._stop(t, step, x, v, "the state became non-finite (NaN/Inf/overflow)")
         why = self.guard.check(t, v, m) if self.guard is not None else None
@@ -457,9 +476,12 @@ class DivergenceCheck:
         return m
 
     def initial_moments(self, v):
-        """The moments of the initial velocities as ``__call__`` gives them (None when the
-        guard does not measure them); the next step then starts from their centre."""
-        return self.moments(v) if self.guard is not None and self.guard.active else None
+        """The moments of the initial velocities ``v`` (equal to ``v0``: the run's working
+        copy) as ``__call__`` gives them (None when the guard does not measure them), taken
+        once by the :class:`Guard`; the next step then starts from their centre."""
+        if self.guard is None or not self.guard.active:
+            return None
+        return self.guard.m0
 
     def _stop(self, t, step, x, v, why):
         fixed_dt = self.dt if self.n_steps is not None else None

@@ -20,6 +20,21 @@ Kernels
     ``r = Σᵢ wᵢ(aᵢ − c)`` and ``acc = [Σᵢ wᵢ‖aᵢ − c‖², Σᵢ wᵢ‖aᵢ‖², Σᵢⱼ aᵢⱼ, Σᵢ wᵢ]``, rows summed
     in blocks of :data:`BLOCK` (error growth ``O((d + n/BLOCK + BLOCK)·u)``, not ``O(n·d·u)``).
 
+``euler_sweep(x, dx, v, dv, h, w, shift, c, r, acc)`` / ``euler_sweep_v`` / ``euler_sweep_one``
+    :func:`euler_pair` (``euler_sweep_v``: with ``dx`` = ``v``, which vectorizes;
+    ``euler_sweep_one``: :func:`euler_one`) and, row by row while the row is in cache, the
+    sums of ``sweep`` of the *new* ``x + shift[0]`` and ``v + shift[1]`` about ``c[0]`` and
+    ``c[1]`` into ``r[k], acc[k]``: one pass per step gives the state and its moments. The
+    update is not under fastmath (bit-identical to :func:`euler_pair`), the sums re-associate
+    only. :func:`euler_moments` runs them over two row halves and finishes the moments as
+    :func:`moments` does. Twin: :func:`euler_moments_numpy`.
+
+``shifted_copy(z, shift, out)``
+    ``out = z − shift`` element by element (numpy's rounding). The run's fixed costs use it:
+    :func:`frame` centres the initial positions (the centroid from :func:`moments`' sweeps,
+    no temporary; one writing pass), :func:`add_shift` shifts the final positions back in
+    place (``x − (−shift)``, numpy's ``x + shift`` bit for bit).
+
 :func:`moments` ``(z, w, shift, c, out)`` joins the sweeps of two row halves into
 ``out = [F, S, T]``: the fluctuation ``F = Σᵢ wᵢ‖aᵢ − a_c‖²`` (``Γ`` or ``Λ`` of §3.4.1), the
 second moment ``S = Σᵢ wᵢ‖aᵢ‖²`` and the plain sum ``T`` (non-finite iff a coordinate is, or
@@ -48,7 +63,10 @@ from numba import njit
 from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
-           "moments_numpy", "state_moments", "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
+           "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
+           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "copy_sweep",
+           "copy_moments", "state_moments",
+           "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
 #: reductions); NaN and Inf still propagate.
@@ -104,6 +122,197 @@ def sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
         rt = 0.0
         for j in range(d):
             a = z[i, j] + shift[j]
+            e = a - c[j]
+            blk[j] += wi * e
+            rc += e * e
+            rs += a * a
+            rt += a
+        part[0] += wi * rc
+        part[1] += wi * rs
+        part[2] += rt
+        part[3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            for j in range(d):
+                r[j] += blk[j]
+                blk[j] = 0.0
+            for k in range(4):
+                acc[k] += part[k]
+                part[k] = 0.0
+
+
+#: fastmath of the fused kernels: re-association of their sums only. No contraction: the
+#: update ``x + dx·h`` must stay a rounded product and a rounded sum (numpy's, bit for bit).
+_FM_FUSED = {"reassoc"}
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _flush(k, blk, part, r, acc):  # pragma: no cover - compiled
+    """Add the block's partial sums ``blk[k], part[k]`` to ``r[k], acc[k]`` and clear them."""
+    for j in range(blk.shape[1]):
+        r[k, j] += blk[k, j]
+        blk[k, j] = 0.0
+    for m in range(4):
+        acc[k, m] += part[k, m]
+        part[k, m] = 0.0
+
+
+@njit(cache=True, nogil=True, fastmath=_FM_FUSED, boundscheck=False, error_model="numpy")
+def euler_sweep(x, dx, v, dv, h, w, shift, c, r, acc):  # pragma: no cover - compiled
+    """:func:`euler_pair` and, in the same pass, the sums of :func:`sweep` of the new
+    ``x + shift[0]`` about ``c[0]`` into ``r[0], acc[0]`` and of the new ``v + shift[1]``
+    about ``c[1]`` into ``r[1], acc[1]``. ``dx`` may be ``v`` (or ``dv`` be ``x``): each
+    element of ``x`` is updated before the same element of ``v``, as in :func:`euler_pair`."""
+    n, d = x.shape
+    blk = np.zeros((2, d))
+    part = np.zeros((2, 4))
+    r[:, :] = 0.0
+    acc[:, :] = 0.0
+    sx, sv, cx, cv = shift[0], shift[1], c[0], c[1]
+    for i in range(n):
+        wi = w[i]
+        qx = 0.0
+        px = 0.0
+        tx = 0.0
+        qv = 0.0
+        pv = 0.0
+        tv = 0.0
+        for j in range(d):
+            xn = x[i, j] + dx[i, j] * h
+            x[i, j] = xn
+            vn = v[i, j] + dv[i, j] * h
+            v[i, j] = vn
+            a = xn + sx[j]
+            e = a - cx[j]
+            blk[0, j] += wi * e
+            qx += e * e
+            px += a * a
+            tx += a
+            b = vn + sv[j]
+            f = b - cv[j]
+            blk[1, j] += wi * f
+            qv += f * f
+            pv += b * b
+            tv += b
+        part[0, 0] += wi * qx
+        part[0, 1] += wi * px
+        part[0, 2] += tx
+        part[0, 3] += wi
+        part[1, 0] += wi * qv
+        part[1, 1] += wi * pv
+        part[1, 2] += tv
+        part[1, 3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            _flush(0, blk, part, r, acc)
+            _flush(1, blk, part, r, acc)
+
+
+@njit(cache=True, nogil=True, fastmath=_FM_FUSED, boundscheck=False, error_model="numpy")
+def euler_sweep_v(x, v, dv, h, w, shift, c, r, acc):  # pragma: no cover - compiled
+    """:func:`euler_sweep` of a second-order scene, whose ``dx`` is ``v`` itself (no
+    ``dx`` argument: the kernel vectorizes, where the aliased ``dx`` and ``v`` prevent it)."""
+    n, d = x.shape
+    blk = np.zeros((2, d))
+    part = np.zeros((2, 4))
+    r[:, :] = 0.0
+    acc[:, :] = 0.0
+    sx, sv, cx, cv = shift[0], shift[1], c[0], c[1]
+    for i in range(n):
+        wi = w[i]
+        qx = 0.0
+        px = 0.0
+        tx = 0.0
+        qv = 0.0
+        pv = 0.0
+        tv = 0.0
+        for j in range(d):
+            vo = v[i, j]
+            xn = x[i, j] + vo * h
+            x[i, j] = xn
+            vn = vo + dv[i, j] * h
+            v[i, j] = vn
+            a = xn + sx[j]
+            e = a - cx[j]
+            blk[0, j] += wi * e
+            qx += e * e
+            px += a * a
+            tx += a
+            b = vn + sv[j]
+            f = b - cv[j]
+            blk[1, j] += wi * f
+            qv += f * f
+            pv += b * b
+            tv += b
+        part[0, 0] += wi * qx
+        part[0, 1] += wi * px
+        part[0, 2] += tx
+        part[0, 3] += wi
+        part[1, 0] += wi * qv
+        part[1, 1] += wi * pv
+        part[1, 2] += tv
+        part[1, 3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            _flush(0, blk, part, r, acc)
+            _flush(1, blk, part, r, acc)
+
+
+@njit(cache=True, nogil=True, fastmath=_FM_FUSED, boundscheck=False, error_model="numpy")
+def euler_sweep_one(x, dx, h, w, shift, c, r, acc):  # pragma: no cover - compiled
+    """:func:`euler_one` and the sums of :func:`sweep` of the new ``x + shift[0]`` about
+    ``c[0]`` into ``r[0], acc[0]`` (arrays of one row, as :func:`euler_sweep`'s)."""
+    n, d = x.shape
+    blk = np.zeros((1, d))
+    part = np.zeros((1, 4))
+    r[:, :] = 0.0
+    acc[:, :] = 0.0
+    sx, cx = shift[0], c[0]
+    for i in range(n):
+        wi = w[i]
+        qx = 0.0
+        px = 0.0
+        tx = 0.0
+        for j in range(d):
+            xn = x[i, j] + dx[i, j] * h
+            x[i, j] = xn
+            a = xn + sx[j]
+            e = a - cx[j]
+            blk[0, j] += wi * e
+            qx += e * e
+            px += a * a
+            tx += a
+        part[0, 0] += wi * qx
+        part[0, 1] += wi * px
+        part[0, 2] += tx
+        part[0, 3] += wi
+        if (i + 1) % BLOCK == 0 or i == n - 1:
+            _flush(0, blk, part, r, acc)
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def shifted_copy(z, shift, out):  # pragma: no cover - compiled
+    """``out = z − shift`` element by element (numpy's ``z - shift``, bit for bit)."""
+    n, d = z.shape
+    for i in range(n):
+        for j in range(d):
+            out[i, j] = z[i, j] - shift[j]
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
+def copy_sweep(z, w, c, r, acc, out):  # pragma: no cover - compiled
+    """``out = z`` (a copy) and, in the same pass, the sums of :func:`sweep` of ``z`` (no
+    shift) about ``c`` into ``r, acc``."""
+    n, d = z.shape
+    blk = np.zeros(d)
+    part = np.zeros(4)
+    r[:] = 0.0
+    acc[:] = 0.0
+    for i in range(n):
+        wi = w[i]
+        rc = 0.0
+        rs = 0.0
+        rt = 0.0
+        for j in range(d):
+            a = z[i, j]
+            out[i, j] = a
             e = a - c[j]
             blk[j] += wi * e
             rc += e * e
@@ -185,6 +394,103 @@ def moments(z, w, shift, c, out) -> None:
         out[2] = acc[2]
 
 
+def _finish(z, w, shift, c, r, acc) -> tuple:
+    """``(F, S, T)`` from one sweep's ``(r, acc)`` about ``c`` (updated in place to the mean);
+    when ``c`` was far from the mean, :func:`moments` sweeps again from ``c + r``."""
+    out = np.empty(3)
+    rr = float(r @ r)
+    c += r
+    if rr <= RECENTRE * acc[0]:
+        out[:] = acc[0] - 2.0 * rr + acc[3] * rr, acc[1], acc[2]
+    else:
+        moments(z, w, shift, c, out)
+    return float(out[0]), float(out[1]), float(out[2])
+
+
+def euler_moments(x, dx, v, dv, h, w, shift, centres) -> tuple:
+    """Forward Euler's in-place update of :func:`euler` and the moments ``(F, S, T)`` of
+    :func:`moments` of the new ``x + shift`` (``shift`` None: 0) and the new ``v``, from one
+    pass over the state (:func:`euler_sweep`; :func:`euler_sweep_v` when ``dx`` is ``v``;
+    ``v`` None: :func:`euler_sweep_one`) over the
+    row ranges of :func:`_halves`.
+
+    ``centres``: the reference centres ``[c_x, c_v]`` (``(d,)`` arrays), updated in place to
+    the means. Returns ``(moments of x, moments of v)`` (the latter None when ``v`` is None).
+    The update is bit-identical to :func:`euler`'s, the moments equal :func:`moments`' to
+    round-off (1e-12 relative). Twin: :func:`euler_moments_numpy`.
+    """
+    n, d = x.shape
+    k = 1 if v is None else 2
+    sh = np.zeros((k, d))
+    if shift is not None:
+        sh[0] = shift
+    with np.errstate(all="ignore"):             # NaN and Inf propagate to the caller's test
+        c = np.array(centres[:k], dtype=float)
+        c[~np.isfinite(c)] = 0.0
+
+        def part(i0, i1):
+            r, acc = np.empty((k, d)), np.empty((k, 4))
+            if v is None:
+                euler_sweep_one(x[i0:i1], dx[i0:i1], h, w[i0:i1], sh, c, r, acc)
+            elif dx is v:
+                euler_sweep_v(x[i0:i1], v[i0:i1], dv[i0:i1], h, w[i0:i1], sh, c, r, acc)
+            else:
+                euler_sweep(x[i0:i1], dx[i0:i1], v[i0:i1], dv[i0:i1], h, w[i0:i1], sh, c,
+                            r, acc)
+            return r, acc
+        parts = _each(part, _halves(n, d))
+        r, acc = parts[0]
+        for rp, ap in parts[1:]:
+            r, acc = r + rp, acc + ap
+        out = []
+        for a, z in enumerate((x, v)[:k]):
+            centres[a][:] = c[a]
+            out.append(_finish(z, w, sh[a], centres[a], r[a], acc[a]))
+    return out[0], (out[1] if k == 2 else None)
+
+
+def euler_moments_numpy(x, dx, v, dv, h, w, shift, tmp) -> tuple:
+    """Twin of :func:`euler_moments`: :func:`euler_numpy`, then :func:`moments_numpy` of the
+    new ``x + shift`` and ``v``."""
+    euler_numpy(x, dx, v, dv, h, tmp)
+    mx = tuple(float(a) for a in moments_numpy(x, w, shift))
+    return mx, (None if v is None else tuple(float(a) for a in moments_numpy(v, w)))
+
+
+def frame(z, w) -> tuple:
+    """``(z − c, c, (F, S, T))``: a fresh copy of ``z (N, d)`` relative to its weighted
+    centroid ``c``, the reference centre that :func:`moments` leaves from 0 (compensated when
+    the centroid is far from 0, as :func:`kinred.observables.centre`; one or two sweeps, no
+    ``(N, d)`` temporary), the copy written by :func:`shifted_copy` (one pass), and the
+    moments of ``z`` that came with ``c``."""
+    n, d = z.shape
+    c, m = np.zeros(d), np.empty(3)
+    moments(z, w, np.zeros(d), c, m)
+    out = np.empty((n, d))
+    shifted_copy(z, c, out)
+    return out, c, (float(m[0]), float(m[1]), float(m[2]))
+
+
+def copy_moments(z, w) -> tuple:
+    """``(copy of z, (F, S, T), c)``: a fresh copy of ``z (N, d)`` and its moments of
+    :func:`moments` about the reference centre ``c`` (from 0, updated to the mean), from one
+    pass (:func:`copy_sweep`; a second sweep when the mean is far from 0)."""
+    n, d = z.shape
+    out, c = np.empty((n, d)), np.zeros(d)
+    r, acc = np.empty(d), np.empty(4)
+    copy_sweep(z, w, c, r, acc, out)
+    with np.errstate(all="ignore"):
+        m = _finish(out, w, np.zeros(d), c, r, acc)
+    return out, m, c
+
+
+def add_shift(x, shift) -> None:
+    """``x ← x + shift`` in place (numpy's ``np.add(x, shift)``, bit for bit: the kernel
+    :func:`shifted_copy` subtracts ``−shift``) over the row ranges of :func:`_halves`."""
+    neg = -np.asarray(shift, dtype=float)
+    _each(lambda i0, i1: shifted_copy(x[i0:i1], neg, x[i0:i1]), _halves(*x.shape))
+
+
 def euler(x, dx, v, dv, h) -> None:
     """:func:`euler_pair` (``v`` None: :func:`euler_one`) over the row ranges of
     :func:`_halves` (element by element: the result does not depend on the split)."""
@@ -252,10 +558,14 @@ class Moments:
     def __init__(self, w, shift=None):
         self.w, self.shift, self.centre = w, shift, None
 
-    def __call__(self, z) -> tuple:
-        """``(F, S, T)`` of ``z (+ shift)``."""
+    def ready(self, z) -> np.ndarray:
+        """The reference centre for ``z`` (made on the first call)."""
         if self.centre is None or self.centre.shape != z.shape[1:]:
             # positions relative to their centroid: the shift is the first guess of the centre
             self.centre = (np.array(self.shift, dtype=float) if self.shift is not None and
                            np.shape(self.shift) == z.shape[1:] else np.zeros(z.shape[1:]))
-        return state_moments(z, self.w, self.shift, self.centre)
+        return self.centre
+
+    def __call__(self, z) -> tuple:
+        """``(F, S, T)`` of ``z (+ shift)``."""
+        return state_moments(z, self.w, self.shift, self.ready(z))

@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import observables as _obs
 from ..errors import InvalidInput
+from . import _kernels
 
 __all__ = ["StepState", "Observer", "as_observers", "Progress", "working_frame"]
 
@@ -114,11 +115,36 @@ def working_frame(scene, x0: np.ndarray, v0: np.ndarray | None) -> tuple:
     if not isinstance(scene, Scene):
         raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
     x0, v0 = scene._check_state(x0, v0, ("x0", "v0"))
-    w = scene.agent_weights(x0.shape[0])
-    shift = _obs.centre(x0, w) if scene.translation_invariant else None
-    x = x0 - shift if shift is not None else x0.copy()
-    v = v0.copy() if v0 is not None else None
-    return x, v, shift
+    return frame_of(scene, x0, v0, scene.agent_weights(x0.shape[0]))[:3]
+
+
+#: From this many entries ``N·d`` on, :func:`working_frame` centres the positions by compiled
+#: passes (:func:`._kernels.frame`: the centroid summed in blocks, compensated, no
+#: temporary; equal to :func:`kinred.observables.centre` to round-off); below, by numpy.
+FRAME_MIN = 2 ** 18
+
+
+def frame_of(scene, x0, v0, w) -> tuple:
+    """``(x, v, shift, (mx, mv))``: :func:`working_frame` of a validated state ``(x0, v0)``
+    with agent weights ``w``, and what the compiled passes gave besides (else None): the
+    moments ``mx`` of ``x0`` (:func:`._kernels.state_moments`) and ``mv = (moments of v0,
+    reference centre)`` (:func:`._kernels.copy_moments`: the copy and ``Γ(v0)`` in one
+    pass)."""
+    mx = mv = None
+    large = x0.size >= FRAME_MIN and x0.ndim == 2
+    if v0 is None:
+        v = None
+    elif large:
+        v, m, c = _kernels.copy_moments(v0, w)
+        mv = (m, c)
+    else:
+        v = v0.copy()
+    if not large or not scene.translation_invariant:
+        shift = _obs.centre(x0, w) if scene.translation_invariant else None
+        x = x0 - shift if shift is not None else x0.copy()
+    else:
+        x, shift, mx = _kernels.frame(x0, w)
+    return x, v, shift, (mx, mv)
 
 
 def _readonly(a):

@@ -18,7 +18,7 @@ import numpy as np
 from .. import observables as _obs
 from .._validate import _short, as_array, as_int, check_alloc, fmt_count
 from ..errors import InvalidInput
-from ._kernels import Moments
+from ._kernels import Moments, add_shift
 
 __all__ = ["SaveAt", "SaveGrid", "save_grid", "Recorder", "save_points", "check_save_size"]
 
@@ -258,18 +258,29 @@ class Recorder:
         # copy at the last save point and nothing per step
         self.last = n_save - 1 if not isinstance(save.states, str) and not save.states else -1
         self.final = None
+        self.pending = None         # the shift still to be added to the final positions
 
-    def __call__(self, j, t, x, v, v_moments=None):
+    def __call__(self, j, t, x, v, v_moments=None, known=None):
         """Record save point ``j`` at time ``t`` from the working state ``(x, v)``;
-        ``v_moments``: :func:`._kernels.state_moments` of ``v`` if known (the guard's)."""
+        ``v_moments``: :func:`._kernels.state_moments` of ``v`` if known (the guard's);
+        ``known``: those ``(of x + shift, of v)`` when the step gave them."""
+        if known is not None:
+            v_moments = known[1] if known[1] is not None else v_moments
         for name, k in self.fused:
             if k == 1 and v_moments is None:
                 v_moments = self.moments[1](v)
-            val = v_moments[0] if k == 1 else self.moments[0](x)[0]
+            val = (v_moments[0] if k == 1 else known[0][0] if known is not None and
+                   known[0] is not None else self.moments[0](x)[0])
             self.rec[name].append(np.asarray(val, dtype=float))
         xt = x
-        if self.shift is not None and (self.plain or self.X is not None or j == self.last):
+        if self.shift is not None and (self.plain or self.X is not None):
             xt = np.add(x, self.shift, out=self.X[j] if self.X is not None else None)
+        elif self.shift is not None and j == self.last:
+            # the final state alone: the shift is added in place once the run is over
+            # (:meth:`states`; observers still see the working positions)
+            self.final = (x[None], None if v is None else v[None])
+            self.pending = self.shift
+            return
         for name, fn in self.plain:
             self.rec[name].append(np.asarray(fn(t, xt, v, self.w), dtype=float))
         if self.X is not None and xt is x:
@@ -283,6 +294,13 @@ class Recorder:
     def states(self, times: np.ndarray) -> tuple:
         """``(x, v, t_states)``: the recorded states and their times (the save times), or,
         when none were requested, the final state ``(1, N, d)`` at ``times[-1]``."""
+        if self.pending is not None:
+            x = self.final[0][0]
+            if x.ndim == 2 and x.dtype == np.float64 and x.flags.writeable:
+                add_shift(x, self.pending)      # np.add(x, shift)'s rounding, in place
+            else:
+                x += self.pending
+            self.pending = None
         if self.final is not None:
             return self.final[0], self.final[1], np.asarray(times[-1:], dtype=float)
         if self.X is None and self.V is None:

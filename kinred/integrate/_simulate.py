@@ -22,11 +22,11 @@ from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
 from ._guard import DivergenceCheck
-from ._observers import Progress, as_observers, state_view, working_frame
+from ._observers import Progress, as_observers, frame_of, state_view
 from ._registry import SOLVERS, method_name
-from ._save import (Recorder, SaveAt, SaveGrid, check_save_size, observable_list, save_grid,
-                    save_points)
-from ._solvers import VectorField
+from ._save import (FUSED_MIN, Recorder, SaveAt, SaveGrid, check_save_size, observable_list,
+                    save_grid, save_points)
+from ._solvers import EulerMoments, ExplicitRK, VectorField
 
 __all__ = ["simulate", "Trajectory"]
 
@@ -175,6 +175,8 @@ class _Run:
     dt: float
     state: tuple
     shift: np.ndarray | None
+    fused: Any = None       # EulerMoments: the step that gives the moments too, or None
+    known0: Any = None      # the moments (of x0, of v0) the working frame gave (or None)
 
 
 def simulate(scene: Scene, x0, v0=None, t_span=(0.0, 1.0), dt: float = 0.01, *,
@@ -309,7 +311,7 @@ def _loop(r: _Run) -> int:
     t, n, state = r.t0, 0, r.state
     f, rng, solver, control = r.f, r.rng, r.solver, r.control
     ss = solver.init(f, t, state, r.dt)
-    r.record(0, t, *state, r.check.initial_moments(state[1]))
+    r.record(0, t, *state, r.check.initial_moments(state[1]), r.known0)
     if r.observers:
         _notify(r, t, 0, 0.0, state, initial=True)
     times, steps = r.grid
@@ -318,14 +320,18 @@ def _loop(r: _Run) -> int:
         lands = False
         while not lands:
             h, t_end, lands = control.propose(t, n, times[j], target_n)
-            new, err, new_ss = solver.step(f, t, state, h, ss, rng)
+            if r.fused is not None:         # Euler and the moments in one pass
+                new, known = r.fused(f, t, state, h, ss, rng)
+                err, new_ss = None, ss
+            else:
+                (new, err, new_ss), known = solver.step(f, t, state, h, ss, rng), None
             if not control.judge(t, state, new, err):
                 lands = False
                 continue
             t, state, ss, n = t_end, new, new_ss, n + 1
-            moments = r.check(t, n, *state)
+            moments = r.check(t, n, *state, known)
             if lands:
-                r.record(j, times[j], *state, moments)
+                r.record(j, times[j], *state, moments, known)
             if r.observers:
                 _notify(r, t, n, h, state)
             control.accepted(t, solver, ss)
@@ -402,9 +408,14 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 
-    x, v, shift = working_frame(scene, x0, v0)
+    x, v, shift, (x_moments, v_moments) = frame_of(scene, x0, v0, w)   # x0, v0 validated
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
-                            x0, v0, w)
+                            x0, v0, w, v_moments)
+    fused = None
+    if (type(solver) is ExplicitRK and solver.table.stages == 1 and solver.table.E is None
+            and not controller.adaptive and x0.size >= FUSED_MIN):
+        fused = EulerMoments(w, record.moments[0], check.moments)
     return _Run(scene, method, solver, control, VectorField(scene), rng, grid, record, check,
-                observers, t0, t1, dt, (x, v), shift)
+                observers, t0, t1, dt, (x, v), shift, fused,
+                (x_moments, None if v_moments is None else v_moments[0]))

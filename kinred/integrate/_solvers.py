@@ -39,7 +39,7 @@ from . import _kernels
 from ._guard import real_stability
 from ._tables import EULER, RKTable
 
-__all__ = ["Solver", "VectorField", "ExplicitRK", "EulerMaruyama"]
+__all__ = ["Solver", "VectorField", "ExplicitRK", "EulerMaruyama", "EulerMoments"]
 
 
 @runtime_checkable
@@ -141,14 +141,49 @@ def _euler_in_place(x, dx, v, dv, h, solver_state):
     """``x ← x + h·dx``, then ``v ← v + h·dv``, in place: by the compiled kernel
     (:mod:`._kernels`, one pass, no temporary) for float64 arrays of one shape, else through
     numpy and a scratch array; the same rounding either way."""
-    arrays = (x, dx) if v is None else (x, dx, v, dv)
-    if all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == x.shape
-           for a in arrays) and x.ndim == 2:
+    if _f64_like(x, (x, dx) if v is None else (x, dx, v, dv)):
         _kernels.euler(x, dx, v, dv, float(h))
         return
     if solver_state.scratch is None:
         solver_state.scratch = np.empty_like(x)
     _kernels.euler_numpy(x, dx, v, dv, h, solver_state.scratch)
+
+
+def _f64_like(x, arrays) -> bool:
+    return x.ndim == 2 and all(type(a) is np.ndarray and a.dtype == np.float64 and
+                               a.shape == x.shape for a in arrays)
+
+
+class EulerMoments:
+    """Forward Euler's in-place step (:class:`ExplicitRK` of ``EULER``) that also gives the
+    moments ``(F, S, T)`` (:func:`._kernels.state_moments`) of the new positions and
+    velocities, from the same pass over the state (:func:`._kernels.euler_moments`): the
+    loop's finiteness test, the divergence guard's ``Γ`` and the recorded ``Γ`` and ``Λ``
+    need no pass of their own. The state is bit-identical to :class:`ExplicitRK`'s step.
+
+    Parameters
+    ----------
+    w : (N,) ndarray
+        Agent weights.
+    mx, mv : Moments
+        The run's moments of ``x (+ shift)`` and of ``v`` (their reference centres are
+        carried over and updated).
+    """
+
+    def __init__(self, w, mx, mv):
+        self.w, self.mx, self.mv = w, mx, mv
+
+    def __call__(self, f, t, state, h, solver_state, rng):
+        """``((x, v), (moments of x, moments of v or None))`` after one step ``t → t + h``."""
+        x, v = state
+        dx, dv = f(t, x, v, rng)
+        if _f64_like(x, (x, dx) if v is None else (x, dx, v, dv)):
+            centres = [self.mx.ready(x)] + ([] if v is None else [self.mv.ready(v)])
+            m = _kernels.euler_moments(x, dx, v, dv, float(h), self.w, self.mx.shift, centres)
+        else:
+            _euler_in_place(x, dx, v, dv, h, solver_state)
+            m = self.mx(x), (None if v is None else self.mv(v))
+        return (x, v), m
 
 
 def _sq(pair):
