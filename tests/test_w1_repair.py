@@ -16,7 +16,8 @@ from scipy.spatial.distance import cdist
 
 import kinred.distance._sparse as S
 from kinred.distance import w1
-from kinred.distance._repair import plan_cost, repair, tighten
+from kinred.distance._costs import plan_cost
+from kinred.distance._repair import repair, tighten
 from kinred.distance._repair_kernels import repair_numpy
 from kinred.distance._search import CTree, knn
 

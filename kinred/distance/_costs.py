@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["pair_costs", "sorted_unique", "first_per"]
+__all__ = ["pair_costs", "sorted_unique", "first_per", "plan_cost", "plan_noise",
+           "dual_scale"]
 
 
 def pair_costs(X, Y, i, j, chunk: int = 1 << 18) -> np.ndarray:
@@ -39,3 +42,23 @@ def first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
     best[g[first]] = vals[order][first]
     arg[g[first]] = other[order][first]
     return best, arg
+
+
+def plan_cost(X, Y, plan) -> float:
+    """``Σ πᵢⱼ |xᵢ − yⱼ|`` of a plan ``(rows, cols, mass)`` (exact summation)."""
+    pr, pc, pm = plan
+    return math.fsum(pm * pair_costs(X, Y, pr, pc))
+
+
+def plan_noise(X, Y, u, v, plan) -> float:
+    """``max |c − u − v|`` over the plan's edges (zero in exact arithmetic: the round-off
+    left in the potentials)."""
+    pr, pc, _ = plan
+    return float(np.max(np.abs(pair_costs(X, Y, pr, pc) - u[pr] - v[pc])))
+
+
+def dual_scale(a, f, b, g) -> float:
+    """``Σ aᵢ|fᵢ − t| + Σ bⱼ|gⱼ + t|`` (``t`` the median of ``f``): the size of the dual sum
+    ``Σ a f + Σ b g``, whose round-off it bounds."""
+    t = float(np.median(f))
+    return math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._costs import first_per, pair_costs, sorted_unique
+from ._costs import dual_scale, first_per, pair_costs, plan_cost, plan_noise, sorted_unique
 from ._search import CTree, ctransform
 
 __all__ = ["repair", "RepairOutcome"]
@@ -106,7 +106,7 @@ def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = No
     ``start``: the columns to search first -- for every pair violated by ``u, v`` beyond
     ``tiny``, its column or, for its row, the column of the row's minimum of ``c − v`` (by
     default found by one parallel search over all pairs)."""
-    from ._repair_kernels import repair_plan
+    from ._repair_kernels import OUT_OF_WORK, repair_plan
 
     n, m = X.shape[0], Y.shape[0]
     pr, pc, pm = plan
@@ -142,9 +142,9 @@ def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = No
     pred_x, pred_y = np.full(n, -1, np.int64), np.full(m, -1, np.int64)
     rows = np.empty(n, np.int64)
     Yc = np.ascontiguousarray(Y, dtype=np.float64)
-    ne, status, work, cycles = pr.size, 1, 0, 0
+    ne, status, work, cycles = pr.size, OUT_OF_WORK, 0, 0
     chunk = max(10_000, (n + m) // 4)
-    while status == 1 and work < budget:
+    while status == OUT_OF_WORK and work < budget:
         if deadline is not None and time.perf_counter() > deadline:
             break
         ne, status, w, c = repair_plan(
@@ -172,12 +172,6 @@ def _link(erow, head, nxt, ne):
     head[rows[first]] = order[first]
 
 
-def plan_cost(X, Y, plan) -> float:
-    """``Σ πᵢⱼ |xᵢ − yⱼ|`` (exact summation)."""
-    pr, pc, pm = plan
-    return math.fsum(pm * pair_costs(X, Y, pr, pc))
-
-
 def _restricted_ctransform(X, Y, v, cols, f):
     """``min(fᵢ, min over j in cols of (|xᵢ − yⱼ| − vⱼ))`` for every row (exact; a tree over
     the few ``cols`` only: rows whose bound already beats every node stop at the root)."""
@@ -189,7 +183,7 @@ def _restricted_ctransform(X, Y, v, cols, f):
     return np.minimum(out, f)
 
 
-def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, tiny, noise, deadline, tm,
+def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadline, tm,
                      violators: int):
     """One round's certificate with the repair (tree searches; ``trees`` of ``X`` and ``Y``).
 
@@ -204,30 +198,27 @@ def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, tiny, noise, deadline,
     cost, the lower bound, the size of the dual sum, rows the deadline cut short, the
     violators and repaired plan's edges for column generation, the potentials' round-off on
     the plan."""
-    import math as _m
-
     n, m = X.shape[0], Y.shape[0]
     s = time.perf_counter()
-    u, v = tighten(X, Y, u, v, plan, keys, 1e3 * noise + tiny)
-    tiny0 = max(tiny - 2 * noise, 0.0)
+    u, v = tighten(X, Y, u, v, plan, keys, 1e3 * noise + roundoff)
     tm["tighten"] = tm.get("tighten", 0.0) + time.perf_counter() - s
     s = time.perf_counter()
     pr, pc, _ = plan
     f0, j0 = first_per(pr, n, pair_costs(X, Y, pr, pc) - v[pc], pc)
     open_f = np.zeros(n, np.int8)
     f, jf, cand = ctransform(X, Y, v, f0, j0, trees[1], deadline=deadline, open_rows=open_f,
-                             thr=u - tiny0, m=violators, rows=trees[0].order)
+                             thr=u - roundoff, m=violators, rows=trees[0].order)
     ri, qi = np.nonzero(cand >= 0)
     new = ri.astype(np.int64) * m + cand[ri, qi]
     upper = plan_cost(X, Y, plan)
-    lower = _m.fsum(a * f) + _m.fsum(b * v)
+    lower = math.fsum(a * f) + math.fsum(b * v)
     tm["certify"] = tm.get("certify", 0.0) + time.perf_counter() - s
-    bad = f < u - tiny0
+    bad = f < u - roundoff
     n_open = int(open_f.sum())
     if not bad.any() or n_open:
-        return upper, lower, _scale(a, f, b, v), n_open, new, _noise(X, Y, u, v, plan)
+        return upper, lower, dual_scale(a, f, b, v), n_open, new, plan_noise(X, Y, u, v, plan)
     s = time.perf_counter()
-    r = repair(X, Y, u, v, plan, trees[0], tiny0, deadline=deadline,
+    r = repair(X, Y, u, v, plan, trees[0], roundoff, deadline=deadline,
                start=sorted_unique(jf[bad]))
     tm["repair"] = tm.get("repair", 0.0) + time.perf_counter() - s
     tm["repair_cycles"] = tm.get("repair_cycles", 0) + r.cycles
@@ -236,21 +227,9 @@ def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, tiny, noise, deadline,
     new = np.concatenate([new, rp * m + rc])
     upper = min(upper, plan_cost(X, Y, r.plan))
     if not r.converged:
-        return upper, lower, _scale(a, f, b, v), 0, new, _noise(X, Y, u, v, plan)
+        return upper, lower, dual_scale(a, f, b, v), 0, new, plan_noise(X, Y, u, v, plan)
     s = time.perf_counter()
     f2 = _restricted_ctransform(X, Y, r.v, np.nonzero(r.v != v)[0], f)
-    lower = max(lower, _m.fsum(a * f2) + _m.fsum(b * r.v))
+    lower = max(lower, math.fsum(a * f2) + math.fsum(b * r.v))
     tm["certify"] += time.perf_counter() - s
-    return upper, lower, _scale(a, f2, b, r.v), 0, new, _noise(X, Y, r.u, r.v, r.plan)
-
-
-def _scale(a, f, b, g) -> float:
-    """``Σ aᵢ|fᵢ − t| + Σ bⱼ|gⱼ + t|`` (``t`` the median of ``f``): the size of the dual sum."""
-    t = float(np.median(f))
-    return math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))
-
-
-def _noise(X, Y, u, v, plan) -> float:
-    """``max |c − u − v|`` over the plan's edges (zero in exact arithmetic)."""
-    pr, pc, _ = plan
-    return float(np.max(np.abs(pair_costs(X, Y, pr, pc) - u[pr] - v[pc])))
+    return upper, lower, dual_scale(a, f2, b, r.v), 0, new, plan_noise(X, Y, r.u, r.v, r.plan)

@@ -83,7 +83,7 @@ def _find_edge(head, nxt, ecol, p, j):
 
 
 @njit(cache=True)
-def _cancel(p0, pred_x, pred_y, erow, ecol, emass, head, nxt, ne, rows, queue, inq, qs, n):
+def _cancel(p0, pred_x, pred_y, erow, ecol, emass, head, nxt, ne, rows, queue, inq, qs):
     """Move mass around the predecessor cycle through row ``p0`` (``pred_x[p0]`` set).
 
     Returns the new edge count, or ``-1`` when the edge arrays have no room (nothing moved)."""
@@ -207,7 +207,7 @@ def repair_plan(Xs, Y, us, v, lo, hi, umax, first_leaf, starts, erow, ecol, emas
             p = _sweep(pred_x, pred_y, erow, rows, n)
             if p >= 0:
                 ne2 = _cancel(p, pred_x, pred_y, erow, ecol, emass, head, nxt, ne, rows,
-                              queue, inq, qs, n)
+                              queue, inq, qs)
                 if ne2 < 0:
                     status = OUT_OF_EDGES
                     break
@@ -250,7 +250,7 @@ def repair_plan(Xs, Y, us, v, lo, hi, umax, first_leaf, starts, erow, ecol, emas
                 _push(queue, inq, qs, p)
                 if closes:
                     ne2 = _cancel(p, pred_x, pred_y, erow, ecol, emass, head, nxt, ne, rows,
-                                  queue, inq, qs, n)
+                                  queue, inq, qs)
                     if ne2 < 0:
                         return ne, OUT_OF_EDGES, work, cycles
                     ne = ne2

@@ -50,7 +50,7 @@ from ._bracket import _principal_axis
 from ._inputs import Pts
 from ._oned import monotone_pieces
 from ._repair import certify_repaired
-from ._costs import first_per, pair_costs, sorted_unique
+from ._costs import dual_scale, first_per, pair_costs, plan_cost, plan_noise, sorted_unique
 from ._search import CTree, OutOfTime, ctransform, knn, use_tree
 
 __all__ = ["SparseOutcome", "sparse_w1", "BYTES_PER_EDGE", "DEFAULT_K", "DEFAULT_RTOL"]
@@ -218,8 +218,7 @@ def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None):
     g, _, cg = ctransform(Y, X, f, g0, i0, trees[0], deadline=deadline, open_rows=open_g,
                           thr=v - tiny, m=VIOLATORS_PER_ROW, rows=rows_y)
     lower = math.fsum(a * f) + math.fsum(b * g)
-    t = float(np.median(f))
-    scale = math.fsum(a * np.abs(f - t)) + math.fsum(b * np.abs(g + t))
+    scale = dual_scale(a, f, b, g)
     ri, qi = np.nonzero(cf >= 0)
     cj, qj = np.nonzero(cg >= 0)
     new = np.concatenate([ri.astype(np.int64) * m + cf[ri, qi], cg[cj, qj] * m + cj])
@@ -341,12 +340,12 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         tm["solve"] += time.perf_counter() - s
         s = time.perf_counter()
         upper = min(upper, up)
-        tiny = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v)))) \
-            + 2 * noise
+        roundoff = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v))))
+        tiny = roundoff + 2 * noise
         try:
             if trees[0] is not None:
                 up, lo, scale, n_open, new, noise = certify_repaired(
-                    X, a, Y, b, u, v, plan, keys, trees, tiny, noise, budget.deadline, tm,
+                    X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, budget.deadline, tm,
                     VIOLATORS_PER_ROW)
                 upper = min(upper, up)
             else:
@@ -390,9 +389,8 @@ def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
     costs = pair_costs(X, Y, rows, cols)
     pr, pc, pm, u, v = _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline)
     del costs, rows, cols
-    pcost = pair_costs(X, Y, pr, pc)
-    noise = float(np.max(np.abs(pcost - u[pr] - v[pc])))
-    return math.fsum(pm * pcost), u, v, (pr, pc, pm), noise
+    plan = (pr, pc, pm)
+    return plan_cost(X, Y, plan), u, v, plan, plan_noise(X, Y, u, v, plan)
 
 
 @dataclass
