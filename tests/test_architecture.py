@@ -304,3 +304,16 @@ def test_libraries_stay_where_the_table_and_the_house_rules_put_them():
         if lib in ("numba", "llvmlite") and not (last.startswith("_") and last.endswith("kernels")):
             bad.append(f"{mod} imports {lib} outside a private _kernels module")
     assert bad == []
+
+
+def test_import_kinred_leaves_the_slow_scipy_modules_for_later():
+    """``import kinred`` (so every CLI call) does not import scipy.stats or scipy.integrate:
+    they took 1 s of its 2 s; the functions that need them import them when called."""
+    import subprocess
+    import sys
+
+    code = ("import sys, kinred, kinred.cli; "
+            "print(sorted(m for m in ('scipy.stats', 'scipy.integrate') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120).stdout.strip()
+    assert out == "[]"

@@ -11,7 +11,6 @@ the form of eq. (4.18)-(4.21) of the paper.
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import quad
 
 from ._inputs import Cont1D, Pts
 
@@ -110,6 +109,8 @@ def w1_cont_atoms(F: Cont1D, y: np.ndarray, b: np.ndarray, *, tol: float = 1e-13
     bad = np.flatnonzero(err > tol * max(width, 1e-300))
     total_err = float(err.sum())
     if bad.size:
+        from scipy.integrate import quad  # lazy: ~0.3 s of `import kinred`
+
         for k in bad:
             gk = float(G[k])
             val, e = quad(
@@ -134,6 +135,8 @@ def w1_cont_cont(F: Cont1D, G: Cont1D, *, tol: float = 1e-12) -> tuple[float, fl
     u = np.linspace(0.0, 1.0, 65)
     pts = np.unique(np.concatenate([F.ppf(u), G.ppf(u), [a, b]]))
     total, err = 0.0, 0.0
+    from scipy.integrate import quad  # lazy: ~0.3 s of `import kinred`
+
     for lo, hi in zip(pts[:-1], pts[1:]):
         if hi <= lo:
             continue

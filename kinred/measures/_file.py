@@ -50,7 +50,6 @@ import re
 import sys
 
 import numpy as np
-from scipy import stats
 
 from .._validate import _short, check_alloc, fmt_count
 from ..errors import ConfigError, InvalidInput
@@ -170,6 +169,8 @@ def _coordinates(tables, source, where) -> list[Measure]:
             continue
         if "at" in t:
             raise _err(source, f"{key}.at", "only used with dist = 'dirac'")
+        from scipy import stats  # imported here: scipy.stats takes ~1 s of `import kinred`
+
         gen = getattr(stats, name, None)
         if not isinstance(gen, stats.rv_continuous):
             raise _err(

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
 from .._validate import as_array, as_float
 from ..errors import InvalidInput
@@ -71,6 +70,8 @@ class Univariate(Measure):
     dim = 1
 
     def __init__(self, dist, support=None):
+        from scipy import stats  # imported here: scipy.stats takes ~1 s, half of `import kinred`
+
         if not (hasattr(dist, "dist") and isinstance(getattr(dist, "dist"), stats.rv_continuous)):
             raise InvalidInput(
                 "dist must be a frozen scipy.stats continuous distribution such as "
@@ -184,6 +185,8 @@ class Uniform(Univariate):
         b = as_float(b, "b")
         if not a < b:
             raise InvalidInput(f"Uniform needs a < b, got a={a}, b={b} (use Dirac for a point mass)")
+        from scipy import stats
+
         super().__init__(stats.uniform(loc=a, scale=b - a))
         self.a, self.b = a, b
         self.support = (a, b)
