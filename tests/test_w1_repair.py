@@ -46,7 +46,7 @@ def _sparse_solution(X, a, Y, b, k, paired, seed=0):
     keys = S.sorted_unique(np.concatenate([ci * m + cj,
                                            np.repeat(np.arange(n), nx.shape[1]) * m
                                            + nx.ravel()]))
-    up, u, v, plan, noise = S._solve_round(X, a, Y, b, keys, None, None)
+    up, u, v, plan, noise, _ = S._solve_round(X, a, Y, b, keys, None, None)
     return keys, up, u, v, plan, noise
 
 

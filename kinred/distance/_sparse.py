@@ -46,6 +46,7 @@ import numpy as np
 
 from .._validate import check_alloc
 from ..errors import NotConverged
+from ._assign import ASSIGNMENT, is_assignment, solve_assignment
 from ._bracket import _principal_axis
 from ._inputs import Pts
 from ._oned import monotone_pieces
@@ -76,6 +77,9 @@ BYTES_PER_EDGE = 128
 
 _EPS = np.finfo(np.float64).eps
 
+#: The general solver's name in results and notes.
+NETWORK_SIMPLEX = "POT's network simplex"
+
 #: Below this many pairs N·M the candidate graph is every pair (the problem is dense anyway).
 _ALL_PAIRS = 20_000
 
@@ -94,6 +98,8 @@ class SparseOutcome:
     timings: dict = field(default_factory=dict)
     #: the time budget stopped the first network-simplex solve (the bracket is not the dual's)
     first_solve_stopped: bool = False
+    #: the solver of the restricted problems (:data:`NETWORK_SIMPLEX` or the assignment's)
+    solver: str = ""
 
 
 def _coupling_edges(X, a, Y, b, paired: bool, rng):
@@ -124,8 +130,15 @@ def _initial_keys(X, a, Y, b, k: int, paired: bool, rng) -> np.ndarray:
     return sorted_unique(np.concatenate(parts))  # deduplicated: COO -> CSR sums repeats
 
 
-def _solve(a, b, rows, cols, costs, n, m, num_iter_max):
-    """POT's network simplex on the edges: plan (rows, cols, mass), u, v."""
+def _solve(a, b, rows, cols, costs, n, m, num_iter_max, assignment=False):
+    """The restricted problem on the edges: plan (rows, cols, mass), u, v and the solver's
+    name -- with ``assignment`` (``a`` and ``b`` are ``n`` equal weights) the sparse
+    assignment solver (:mod:`kinred.distance._assign`), else (or if that fails) POT's network
+    simplex."""
+    if assignment:
+        out = solve_assignment(a, rows, cols, costs, n)
+        if out is not None:
+            return (*out, ASSIGNMENT)
     import ot
     from scipy.sparse import coo_array
 
@@ -142,12 +155,22 @@ def _solve(a, b, rows, cols, costs, n, m, num_iter_max):
             f"numItermax={it} iterations; pass a larger num_iter_max")
     keep = G.data > 0
     return (np.asarray(G.row)[keep].astype(np.int64), np.asarray(G.col)[keep].astype(np.int64),
-            np.asarray(G.data)[keep], np.asarray(log["u"], float), np.asarray(log["v"], float))
+            np.asarray(G.data)[keep], np.asarray(log["u"], float), np.asarray(log["v"], float),
+            NETWORK_SIMPLEX)
 
 
 #: Candidate graphs from this many edges solve in a forked child when a time budget is set:
 #: the network simplex cannot be interrupted, the child can (below it, solves take < 1 s).
 FORK_EDGES = 500_000
+
+#: The assignment solver's allowance on graphs of :data:`FORK_EDGES` edges or more, before the
+#: network simplex takes over: ``ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE·edges``. LAPJVsp is
+#: fast when the optimal plan stays near the identity pairing (10⁶ atoms, 10⁷ edges: 1.5 s;
+#: the network simplex: 38 s) and slow when it moves atoms by more than their spacing (10⁵
+#: atoms of the delayed-curse scene: 44 s; the network simplex: 12 s): the allowance, about a
+#: quarter of a network-simplex solve of that size, bounds what a wrong guess costs.
+ASSIGN_SECONDS = 2.0
+ASSIGN_SECONDS_PER_EDGE = 1e-6
 
 
 class _SolveTimedOut(Exception):
@@ -157,12 +180,38 @@ class _SolveTimedOut(Exception):
 def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
     """:func:`_solve`, stopped at ``deadline`` (``time.perf_counter``): in a forked child
     process when the graph is large (the inputs are inherited, not copied; only the plan and
-    the duals, ``O(n + m)``, come back through a pipe). Raises :class:`_SolveTimedOut`."""
+    the duals, ``O(n + m)``, come back through a pipe). Raises :class:`_SolveTimedOut`.
+    An assignment problem on a large graph first gets the assignment solver's allowance
+    (:data:`ASSIGN_SECONDS`), then the network simplex."""
+    import multiprocessing as mp
+
+    args = (a, b, rows, cols, costs, n, m, num_iter_max)
+    forkable = rows.size >= FORK_EDGES and "fork" in mp.get_all_start_methods()
+    if is_assignment(a, b):
+        if not forkable:
+            return _solve(*args, True)
+        start = time.perf_counter()
+        stop = start + ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE * rows.size
+        try:
+            return _in_child(lambda: _solve(*args, True),
+                             stop if deadline is None else min(stop, deadline))
+        except _SolveTimedOut:
+            if deadline is not None and time.perf_counter() >= deadline:
+                raise
+        out = (_solve(*args) if deadline is None else
+               _in_child(lambda: _solve(*args), deadline))
+        return (*out[:5], f"{out[5]} (the assignment solver was stopped after its "
+                          f"{stop - start:.1f} s)")
+    if deadline is None or not forkable:
+        return _solve(*args)
+    return _in_child(lambda: _solve(*args), deadline)
+
+
+def _in_child(fn, deadline):
+    """``fn()`` in a forked child, stopped at ``deadline``; raises what it raised."""
     import multiprocessing as mp
     import pickle
 
-    if deadline is None or rows.size < FORK_EDGES or "fork" not in mp.get_all_start_methods():
-        return _solve(a, b, rows, cols, costs, n, m, num_iter_max)
     left = deadline - time.perf_counter()
     if left <= 0:
         raise _SolveTimedOut
@@ -171,7 +220,7 @@ def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
 
     def child():
         try:
-            out = ("ok", _solve(a, b, rows, cols, costs, n, m, num_iter_max))
+            out = ("ok", fn())
         except BaseException as exc:  # noqa: BLE001 -- re-raised in the parent
             out = ("error", exc)
         send.send_bytes(pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL))
@@ -326,11 +375,13 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
     stopped_first = False
+    solver = ASSIGNMENT if is_assignment(a, b) else NETWORK_SIMPLEX
     while True:
         it += 1
         s = time.perf_counter()
         try:
-            up, u, v, plan, noise = _solve_round(X, a, Y, b, keys, num_iter_max, budget.deadline)
+            up, u, v, plan, noise, solver = _solve_round(X, a, Y, b, keys, num_iter_max,
+                                                         budget.deadline)
         except _SolveTimedOut:
             tm["solve"] += time.perf_counter() - s
             lower, upper, reason = _timed_out(X, a, Y, b, paired, rng, lower, upper, it,
@@ -378,7 +429,7 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     return SparseOutcome(lower=max(lower, 0.0) if not exact else upper, upper=upper, exact=exact,
                          iterations=it, edges=int(keys.size),
                          seconds=time.perf_counter() - t0, reason=reason, timings=tm,
-                         first_solve_stopped=stopped_first)
+                         first_solve_stopped=stopped_first, solver=solver)
 
 
 def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
@@ -387,10 +438,11 @@ def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
     n, m = X.shape[0], Y.shape[0]
     rows, cols = np.divmod(keys, m)
     costs = pair_costs(X, Y, rows, cols)
-    pr, pc, pm, u, v = _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline)
+    pr, pc, pm, u, v, solver = _solve_until(a, b, rows, cols, costs, n, m, num_iter_max,
+                                            deadline)
     del costs, rows, cols
     plan = (pr, pc, pm)
-    return plan_cost(X, Y, plan), u, v, plan, plan_noise(X, Y, u, v, plan)
+    return plan_cost(X, Y, plan), u, v, plan, plan_noise(X, Y, u, v, plan), solver
 
 
 @dataclass
@@ -432,8 +484,9 @@ class _Budget:
 
 def describe(o: SparseOutcome, k: int, unit: float) -> str:
     """The note of a ``method="sparse"`` result."""
-    head = (f"POT network simplex on a sparse candidate graph ({k} nearest neighbours from "
-            f"each side + one coupling; {o.edges} edges after {o.iterations} solve(s) of "
+    head = (f"{o.solver or NETWORK_SIMPLEX} on a sparse candidate graph ({k} nearest "
+            f"neighbours from each side + one coupling; {o.edges} edges after {o.iterations} "
+            f"solve(s) of "
             f"column generation, {o.seconds:.2f} s)")
     if o.exact:
         return (head + "; optimal over all pairs: the c-transform lower bound meets the plan's "
@@ -456,6 +509,7 @@ def run_sparse(PA: Pts, PB: Pts, rng, *, k: int, rtol, max_iter: int, max_edges,
                   max_seconds=max_seconds, max_bytes=max_bytes, num_iter_max=num_iter_max)
     info = {"iterations": o.iterations, "edges": o.edges, "seconds": o.seconds,
             "reason": o.reason, "first_solve_stopped": o.first_solve_stopped,
+            "solver": o.solver,
             **{(key if key.startswith("repair_") else f"seconds_{key}"): val
                for key, val in o.timings.items()}}
     value = o.upper if o.exact else 0.5 * (o.lower + o.upper)

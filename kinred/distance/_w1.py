@@ -171,7 +171,8 @@ def w1(
           :class:`~kinred.errors.NotConverged` if POT still stops early.
         * ``"exact-lazy"`` -- the same LP with ``ot.lp.emd2_lazy`` (costs computed on the fly,
           memory O(N + M), slower than the dense solver: docs/performance.md, section W1).
-        * ``"sparse"`` -- two atomic measures, Euclidean: POT's network simplex on a sparse
+        * ``"sparse"`` -- two atomic measures, Euclidean: POT's network simplex (for ``N``
+          equal weights on both sides: scipy's sparse assignment solver) on a sparse
           candidate graph (``neighbors`` nearest neighbours from each side plus one coupling of
           the full measures), certified by the c-transform of its duals over *all* pairs
           (a lower bound, Kantorovich–Rubinstein), with column generation until the plan's

@@ -93,8 +93,10 @@ def method_text(result) -> list:
     """Paragraphs saying how each kind of number is obtained."""
     cfg, high = result.config, result.high
     cert = any(_finite(r, "cert_w1") for r in result.per_k.values())
-    text = ["Measured: W₁(M#μᴺ(t), νᴺ(t)) is exact (POT network simplex on the two atomic "
-            "measures on phase space ℝ²ᵏ, k position and k velocity coordinates); Γ"
+    text = ["Measured: W₁(M#μᴺ(t), νᴺ(t)) is exact (the optimal transport plan between "
+            "the two atomic measures on phase space ℝ²ᵏ, k position and k velocity "
+            "coordinates, by a network simplex or an assignment solver, proved optimal by its "
+            "dual beyond a few thousand atoms); Γ"
             + (" and the milling index are" if shows_milling(cfg) else " is")
             + " evaluated on the atoms."]
     if cert:
