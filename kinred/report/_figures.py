@@ -31,6 +31,10 @@ def pyplot():
 def figure_png(fig, *, dpi: int = 110, close: bool = True) -> bytes:
     """Render a matplotlib figure to PNG bytes (and close it unless ``close=False``).
 
+    A figure laid out by the constrained layout engine already fits its labels, titles and
+    legends inside the canvas, so it is saved as it is; any other figure is saved with
+    ``bbox_inches="tight"``, which draws it twice (once to measure, once to save).
+
     Examples
     --------
     >>> plt = pyplot()
@@ -39,8 +43,13 @@ def figure_png(fig, *, dpi: int = 110, close: bool = True) -> bytes:
     >>> figure_png(fig)[:8] == b"\\x89PNG\\r\\n\\x1a\\n"
     True
     """
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine):
+        fig.savefig(buf, format="png", dpi=dpi)
+    else:
+        fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     if close:
         pyplot().close(fig)
     return buf.getvalue()
