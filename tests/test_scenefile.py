@@ -421,3 +421,36 @@ def test_scene_file_page_holds_the_current_reference():
     for table, keys in TABLES.items():
         for key in keys:
             assert f"| `{key.name}` |" in body, (table, key.name)
+
+
+@pytest.mark.parametrize("table", [
+    {"dist": "beta", "params": {"a": 2.0, "b": 3.0, "loc": -0.5, "scale": 2.0}, "repeat": 6,
+     "decay": 0.8, "support": [-0.4, 1.2]},
+    {"dist": "uniform", "params": {"a": -1.0, "b": 1.0}, "repeat": 4, "decay": 1.0},
+    {"dist": "norm", "params": {"loc": 0.25, "scale": 0.5}, "repeat": 5, "decay": 1.5,
+     "support": [-1.0, 2.0]},
+], ids=["beta", "uniform", "norm"])
+def test_repeated_coordinates_are_the_laws_frozen_one_by_one(table):
+    # the copies of a [[coordinate]] table share one frozen scipy law's generator (freezing
+    # 400 laws took most of a second): each copy is the law frozen afresh, decay**r·X
+    from scipy import stats
+
+    from kinred.measures import Univariate, measure_from_dict
+
+    coords = measure_from_dict({"coordinate": [table]}).factors
+    gen, p = getattr(stats, table["dist"]), dict(table["params"])
+    if table["dist"] == "uniform":
+        p = {"loc": p["a"], "scale": p["b"] - p["a"]}
+    loc, scale = p.pop("loc", 0.0), p.pop("scale", 1.0)
+    u = np.linspace(0.0, 1.0, 41)
+    assert len(coords) == table["repeat"]
+    for r, c in enumerate(coords):
+        f = table["decay"] ** r
+        sup = table.get("support")
+        fresh = Univariate(gen(**p, loc=loc * f, scale=scale * f),
+                           support=None if sup is None else (sup[0] * f, sup[1] * f))
+        x = fresh.ppf(u)
+        assert np.array_equal(c.ppf(u), x) and np.array_equal(c.cdf(x), fresh.cdf(x)), r
+        assert c.support == fresh.support and c.dist.support() == fresh.dist.support()
+        assert (c.dist.mean(), c.dist.std()) == (fresh.dist.mean(), fresh.dist.std())
+    assert len({id(c.dist) for c in coords}) == table["repeat"]    # each copy its own law
