@@ -104,22 +104,24 @@ t_final = 0.5
 
 @pytest.fixture(scope="module")
 def base_run(tmp_path_factory):
-    """``kinred run`` of BASE into a fresh folder, once per module: its exit code, its
-    stdout and its folder (tests that change the folder work on a copy, see ``_copy_run``)."""
+    """``kinred run tiny.toml`` of BASE, run once per module in a fresh directory without
+    ``--out`` (so into the default folder results/run-tiny): its exit code, its stdout, its
+    folder and that directory (tests that change the folder work on a copy, ``_copy_run``)."""
     tmp = tmp_path_factory.mktemp("base-run")
-    scene, out = tmp / "good.toml", tmp / "out"
+    scene = tmp / "tiny.toml"
     scene.write_text(BASE)
     printed = io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
         if "kinred.commands.run" not in cli.COMMAND_MODULES:
             mp.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.run",))
-        code = cli.main(["run", str(scene), "--out", str(out)])
-    return code, printed.getvalue(), out
+        mp.chdir(tmp)
+        code = cli.main(["run", str(scene)])
+    return code, printed.getvalue(), tmp / "results" / "run-tiny", tmp
 
 
 def _copy_run(base_run, dest):
     """A copy of the module's BASE run at ``dest`` (what ``kinred run BASE --out dest`` left)."""
-    code, _, out = base_run
+    code, _, out, _ = base_run
     assert code == 0
     shutil.copytree(out, dest)
     return dest
@@ -300,13 +302,11 @@ def test_header_explains_the_atom_count(base_run):
     assert "N = ∏ N_j = 2^3 = 8 (3 of 4 coordinates" in " ".join(" ".join(lines).split())
 
 
-def test_default_folder(tmp_path, main, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    scene = tmp_path / "tiny.toml"
-    scene.write_text(BASE)
-    assert main(["run", str(scene)]) == 0
-    assert f"report: {Path('results/run-tiny/report.html')}" in capsys.readouterr().out
-    assert (tmp_path / "results" / "run-tiny" / "summary.json").exists()
+def test_default_folder(base_run):
+    code, printed, _, cwd = base_run           # `kinred run tiny.toml` without --out, in cwd
+    assert code == 0
+    assert f"report: {Path('results/run-tiny/report.html')}" in printed
+    assert (cwd / "results" / "run-tiny" / "summary.json").exists()
 
 
 def test_python_m_kinred_run_subprocess(tmp_path):
