@@ -454,3 +454,32 @@ def test_repeated_coordinates_are_the_laws_frozen_one_by_one(table):
         assert c.support == fresh.support and c.dist.support() == fresh.dist.support()
         assert (c.dist.mean(), c.dist.std()) == (fresh.dist.mean(), fresh.dist.std())
     assert len({id(c.dist) for c in coords}) == table["repeat"]    # each copy its own law
+
+
+def test_mixture_accuracy_is_the_bisection_over_every_component():
+    # _mixture_eps counts equal-shape tensor components once per ε; the accuracy it finds is
+    # the plain bisection's, which plans every component (clouds of two shapes, one of them
+    # twice as the mill scenes' four equal clouds)
+    import math
+
+    from kinred.measures import Dirac, Mixture, TensorProduct, Uniform
+    from kinred.quantize import _planning as pl
+
+    def plain_eps(mu, atoms, rule="midpoint", node_limit=500):
+        def count(e):
+            return sum(pl._plan(m, e, None, rule, node_limit).n_atoms for m in mu.components)
+        hi = pl._coarsest_eps(mu, rule)
+        lo = hi * 1e-12
+        if count(lo) <= atoms:
+            return lo
+        for _ in range(60):
+            mid = math.sqrt(lo * hi)
+            lo, hi = (lo, mid) if count(mid) <= atoms else (mid, hi)
+        return hi
+
+    def cloud(*widths, dirac=False):
+        return TensorProduct([Uniform(0.0, w) for w in widths] + ([Dirac(0.5)] if dirac else []))
+
+    mu = Mixture([cloud(1.0, 2.0), cloud(3.0, 1.0), cloud(1.0, 2.0)],
+                 [0.3, 0.3, 0.4])
+    assert pl._mixture_eps(mu, 50, "midpoint", 500) == plain_eps(mu, 50)
