@@ -335,11 +335,11 @@ def test_apriori_figure_folded_only_when_vacuous_throughout(small, vacuous_repor
 def test_figure_png_of_a_constrained_figure_is_matplotlibs_png(mill):
     # figure_png lays a constrained figure out once and saves it without a layout pass; the
     # bytes are those of matplotlib's own savefig (which lays it out in two draws): the
-    # three-panel W1 figure and the positions with their figure legend outside the axes
+    # positions, three panels and a figure legend outside the axes
     import io
 
     res = _certified(mill, diameter=2.0)
-    for fn in (kr._fig_w1, kr._fig_positions):
+    for fn in (kr._fig_positions,):
         fig = _draw(fn, res)
         assert fig.get_layout_engine().__class__.__name__ == "ConstrainedLayoutEngine"
         png = figure_png(fig, dpi=80, close=False)
