@@ -108,6 +108,7 @@ def test_gamma_decays_to_1e_30_and_matches_twin():
 import json  # noqa: E402
 import os  # noqa: E402
 import re  # noqa: E402
+import shutil  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import kinred.cli as cli  # noqa: E402
@@ -149,6 +150,33 @@ def _cli(args, capsys):
     return rc, out, err
 
 
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """``kinred run`` of TINY_SCENE into a fresh folder, once per module: (exit code, stderr,
+    scene, folder, umask in effect). Tests only read the folder, or change a copy of it
+    (``_copy_run``)."""
+    import contextlib
+    import io
+
+    tmp = tmp_path_factory.mktemp("tiny-run")
+    scene, out = tmp / "s.toml", tmp / "out"
+    scene.write_text(TINY_SCENE)
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = cli.main(["run", str(scene), "--out", str(out)])
+    umask = os.umask(0)
+    os.umask(umask)
+    return rc, err.getvalue(), scene, out, umask
+
+
+def _copy_run(tiny_run, dest):
+    """``dest`` as ``kinred run s.toml --out dest`` leaves it: a copy of the module's run."""
+    rc, err, _, out, _ = tiny_run
+    assert rc == 0, err
+    shutil.copytree(out, dest)
+    return dest
+
+
 def _one_error_line(err, *needles):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("kinred: error: "), err
@@ -187,7 +215,7 @@ def test_cli_quantize_out_is_a_directory(tmp_path, capsys):
     assert os.listdir(d) == []
 
 
-def test_cli_written_files_follow_the_umask(tmp_path, capsys):
+def test_cli_written_files_follow_the_umask(tmp_path, capsys, tiny_run):
     # defect 11: `kinred quantize --out` wrote mode 0600 (its own mkstemp) whatever the umask
     umask = os.umask(0)
     os.umask(umask)
@@ -197,12 +225,11 @@ def test_cli_written_files_follow_the_umask(tmp_path, capsys):
     assert (q.stat().st_mode & 0o777) == (0o666 & ~umask)
     with np.load(q) as z:
         assert z["points"].shape == (8, 200) and abs(z["weights"].sum() - 1.0) < 1e-12
-    scene = tmp_path / "s.toml"
-    scene.write_text(TINY_SCENE)
-    assert _cli(["run", scene, "--out", tmp_path / "o"], capsys)[0] == 0
-    for p in (tmp_path / "o").rglob("*"):
+    rc, err, _, out, run_umask = tiny_run                  # `kinred run` under run_umask
+    assert rc == 0, err
+    for p in out.rglob("*"):
         if p.is_file():
-            assert (p.stat().st_mode & 0o777) == (0o666 & ~umask), p
+            assert (p.stat().st_mode & 0o777) == (0o666 & ~run_umask), p
 
 
 def _huge_bound_scene(tmp_path):
@@ -273,13 +300,10 @@ def _arrays(path):
         return {k: z[k] for k in z.files if not k.endswith("_time")}   # timings differ
 
 
-def test_cli_resume_recomputes_damaged_stage_files(tmp_path, capsys):
+def test_cli_resume_recomputes_damaged_stage_files(tmp_path, capsys, tiny_run):
     # defect 13: a truncated stage file made --resume die with a raw zipfile.BadZipFile
-    scene = tmp_path / "s.toml"
-    scene.write_text(TINY_SCENE)
-    ref, out = tmp_path / "ref", tmp_path / "out"
-    assert _cli(["run", scene, "--out", ref], capsys)[0] == 0
-    assert _cli(["run", scene, "--out", out], capsys)[0] == 0
+    scene, ref = tiny_run[2], tiny_run[3]                  # ref: the clean run, read only
+    out = _copy_run(tiny_run, tmp_path / "out")
     stages = out / "stages"
     os.truncate(stages / "k2.npz", (stages / "k2.npz").stat().st_size // 2)
     os.truncate(stages / "solve.npz", 0)
@@ -302,12 +326,11 @@ def test_cli_resume_recomputes_damaged_stage_files(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("content", [b"", b'{"digest": "ab', b"\xff\xff"], ids=["empty", "cut", "bytes"])
-def test_cli_resume_refuses_damaged_stage_index(content, tmp_path, capsys):
+def test_cli_resume_refuses_damaged_stage_index(content, tmp_path, capsys, tiny_run):
     # defect 13: an empty stages/config.json made --resume die with a raw JSONDecodeError
     scene = tmp_path / "s.toml"
     scene.write_text(TINY_SCENE)
-    out = tmp_path / "out"
-    assert _cli(["run", scene, "--out", out], capsys)[0] == 0
+    out = _copy_run(tiny_run, tmp_path / "out")
     index = out / "stages" / "config.json"
     index.write_bytes(content)
     rc, _, err = _cli(["run", scene, "--out", out, "--resume"], capsys)

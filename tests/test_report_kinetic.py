@@ -40,6 +40,14 @@ def mill():
     return kinetic_run.run(cfg, progress=False)
 
 
+@pytest.fixture(scope="module")
+def vacuous_report(small):
+    """``small`` certified with diameter 1e-6 (the a-priori bound vacuous throughout) and its
+    report's figures, drawn once for the module."""
+    res = _certified(small, diameter=1e-6)
+    return res, kr.figures(res)
+
+
 #: What a run without certificates lacks (the arrays of kinetic_certify.CERT_KEYS and the
 #: cloud's diameter): the report must work without them.
 _CERT = ("err_rms", "err_max", "cert_rms", "cert_max", "cert_w1", "cert_saturated", "paper_rms",
@@ -219,9 +227,9 @@ def test_every_axes_labelled_with_mathtext(certified, small, mill):
             figure_png(fig)            # mathtext parses
 
 
-def test_report_html_figures_first_tables_folded(small):
-    res = _certified(small, diameter=1e-6)
-    html = kr.report(res, kr.figures(res)).to_html()
+def test_report_html_figures_first_tables_folded(small, vacuous_report):
+    res, figures = vacuous_report                          # _certified(small, diameter=1e-6)
+    html = kr.report(res, figures).to_html()
     assert html.index("<figure>") < html.index("<table")
     # the a-priori bound is vacuous throughout (diameter 1e-6): its figure is folded too
     assert html.count("<details>") == len(small.config.ks) + 1
@@ -308,13 +316,37 @@ def test_positions_reduced_panels_share_ranges_and_legend_covers_no_point(small)
     figure_png(fig)
 
 
-def test_apriori_figure_folded_only_when_vacuous_throughout(small):
+def test_apriori_figure_folded_only_when_vacuous_throughout(small, vacuous_report):
     for diameter, folded in ((1e-6, True), (1e6, False)):
-        res = _certified(small, diameter=diameter)
+        if folded:
+            res, figures = vacuous_report                  # _certified(small, diameter=1e-6)
+        else:
+            res = _certified(small, diameter=diameter)
+            figures = kr.figures(res)
         assert kr.vacuous_throughout(res) is folded
-        html = kr.report(res, kr.figures(res)).to_html()
+        html = kr.report(res, figures).to_html()
         start = html.index("<h2>Figures</h2>")
         figs = html[start:html.index("<h2>", start + 5)]
         assert figs.count("<img") == (3 if folded else 4) and html.count("<img") == 4
         assert ("<details><summary><h2>A-priori bound" in html) is folded
     assert not kr.vacuous_throughout(small)            # no diameter: unknown, not folded
+
+
+def test_figure_png_of_a_constrained_figure_is_matplotlibs_png(mill):
+    # figure_png lays a constrained figure out once and saves it without a layout pass; the
+    # bytes are those of matplotlib's own savefig (which lays it out in two draws): the
+    # positions, three panels and a figure legend outside the axes
+    import io
+
+    res = _certified(mill, diameter=2.0)
+    for fn in (kr._fig_positions,):
+        fig = _draw(fn, res)
+        assert fig.get_layout_engine().__class__.__name__ == "ConstrainedLayoutEngine"
+        png = figure_png(fig, dpi=80, close=False)
+        assert fig.get_layout_engine().__class__.__name__ == "ConstrainedLayoutEngine"
+        pyplot().close(fig)
+        buf = io.BytesIO()
+        fig = _draw(fn, res)
+        fig.savefig(buf, format="png", dpi=80)
+        pyplot().close(fig)
+        assert png == buf.getvalue(), fn.__name__

@@ -2,9 +2,12 @@
 (issue 21, item 2): the folder lock, the digest of every stage file, no loading without
 ``--resume``; a full disk is its own error (item 12)."""
 
+import contextlib
 import errno
+import io
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -58,6 +61,28 @@ def main(monkeypatch):
     if "kinred.commands.run" not in cli.COMMAND_MODULES:
         monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.run",))
     return cli.main
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    """``clean_run(name, seed)``: the folder of ``kinred run NAME --out FOLDER`` for SCENE with
+    ``projection.seed = seed`` (a fresh folder), run once per module; tests only read it or
+    copy it."""
+    runs = {}
+
+    def get(name, seed):
+        if (name, seed) not in runs:
+            tmp = tmp_path_factory.mktemp(f"clean-{seed}")
+            scene, out = _scene(tmp, name, seed), tmp / "out"
+            with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(io.StringIO()):
+                if "kinred.commands.run" not in cli.COMMAND_MODULES:
+                    mp.setattr(cli, "COMMAND_MODULES",
+                               cli.COMMAND_MODULES + ("kinred.commands.run",))
+                assert cli.main(["run", str(scene), "--out", str(out), "--no-progress"]) == 0
+            runs[name, seed] = out
+        return runs[name, seed]
+
+    return get
 
 
 def _child(code: str) -> subprocess.Popen:
@@ -196,7 +221,7 @@ def _numbers(folder):
         return {k: z[k] for k in z.files if not k.endswith("_time")}
 
 
-def test_two_runs_into_one_folder(tmp_path, main, capsys):
+def test_two_runs_into_one_folder(tmp_path, main, capsys, clean_run):
     a_scene, b_scene = _scene(tmp_path, "A.toml", 1), _scene(tmp_path, "B.toml", 2)
     out, go = tmp_path / "R", tmp_path / "go"
     args = ["run", str(a_scene), "--out", str(out), "--no-progress"]
@@ -232,8 +257,7 @@ def test_two_runs_into_one_folder(tmp_path, main, capsys):
     b_summary = json.loads((out / "summary.json").read_text())
     assert set(b_summary["stages"].values()) == {"computed"}
     assert b_summary["digest"] != a_summary["digest"]
-    assert main(["run", str(b_scene), "--out", str(tmp_path / "B-alone"), "--no-progress"]) == 0
-    alone, b_numbers = _numbers(tmp_path / "B-alone"), _numbers(out)
+    alone, b_numbers = _numbers(clean_run("B.toml", 2)), _numbers(out)   # B in a new folder
     assert alone.keys() == b_numbers.keys()
     for key in alone:
         assert alone[key].tobytes() == b_numbers[key].tobytes(), key
@@ -325,10 +349,11 @@ def _counting(monkeypatch):
     return calls
 
 
-def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys):
+def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys, clean_run):
     monkeypatch.chdir(tmp_path)
     scene = _scene(tmp_path, "s.toml", 1)
-    assert cli.main(["run", str(scene), "--no-progress"]) == 0     # → results/run-s
+    # `kinred run s.toml` → results/run-s (a copy of that run in a fresh folder)
+    shutil.copytree(clean_run("s.toml", 1), tmp_path / "results" / "run-s")
     run_numbers = _numbers(tmp_path / "results" / "run-s")
     calls = _counting(monkeypatch)
     capsys.readouterr()
@@ -352,8 +377,7 @@ def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys):
         assert alone[key].tobytes() == shared[key].tobytes(), key
     assert run_numbers["k2_w1"].tobytes() == shared["k2_w1"].tobytes()
     # a run of another configuration (projection.seed) shares nothing
-    other = _scene(tmp_path, "o.toml", 5)
-    assert cli.main(["run", str(other), "--out", "other-run", "--no-progress"]) == 0
+    shutil.copytree(clean_run("B.toml", 2), tmp_path / "other-run")   # `kinred run` of seed 2
     del calls[:]
     assert cli.main(["certify", str(scene), "--out", "c2", "--from-run", "other-run",
                      "--no-progress"]) == 0

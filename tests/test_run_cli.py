@@ -1,6 +1,9 @@
 """``kinred run``: shipped scenes in smoke mode, malformed scene files, interrupt and resume."""
 
+import contextlib
+import io
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -99,6 +102,31 @@ t_final = 0.5
 """
 
 
+@pytest.fixture(scope="module")
+def base_run(tmp_path_factory):
+    """``kinred run tiny.toml`` of BASE, run once per module in a fresh directory without
+    ``--out`` (so into the default folder results/run-tiny): its exit code, its stdout, its
+    folder and that directory (tests that change the folder work on a copy, ``_copy_run``)."""
+    tmp = tmp_path_factory.mktemp("base-run")
+    scene = tmp / "tiny.toml"
+    scene.write_text(BASE)
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
+        if "kinred.commands.run" not in cli.COMMAND_MODULES:
+            mp.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.run",))
+        mp.chdir(tmp)
+        code = cli.main(["run", str(scene)])
+    return code, printed.getvalue(), tmp / "results" / "run-tiny", tmp
+
+
+def _copy_run(base_run, dest):
+    """A copy of the module's BASE run at ``dest`` (what ``kinred run BASE --out dest`` left)."""
+    code, _, out, _ = base_run
+    assert code == 0
+    shutil.copytree(out, dest)
+    return dest
+
+
 @pytest.mark.parametrize("edit, key", [
     (lambda s: s.replace("[quantize]\n", "[quantize]\ncolour = 1\n"), "quantize.colour"),
     (lambda s: s.replace("dt = 0.1\n", ""), "integrate.dt"),
@@ -108,10 +136,8 @@ t_final = 0.5
     (lambda s: s.replace('dist = "uniform"\nrepeat = 2\n[initial.velocities]',
                          'dist = "nope"\nrepeat = 2\n[initial.velocities]'), "initial.positions"),
 ])
-def test_malformed_scene_one_line(edit, key, tmp_path, main, capsys):
-    good = tmp_path / "good.toml"
-    good.write_text(BASE)
-    assert main(["run", str(good), "--out", str(tmp_path / "g")]) == 0
+def test_malformed_scene_one_line(edit, key, tmp_path, main, capsys, base_run):
+    assert base_run[0] == 0                         # BASE itself runs (module fixture)
     bad = tmp_path / "bad.toml"
     bad.write_text(edit(BASE))
     capsys.readouterr()
@@ -210,14 +236,13 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
     assert set(json.loads((out / "summary.json").read_text())["stages"].values()) == {"computed"}
 
 
-def test_rerun_rule(tmp_path, main, capsys):
+def test_rerun_rule(tmp_path, main, capsys, base_run):
     """One rule: a previous `kinred run` is replaced (said so), files kinred did not write are
     refused and left alone (exit 2), the result of another command is refused."""
     scene = tmp_path / "s.toml"
     scene.write_text(BASE)
-    out = tmp_path / "out"
-    assert main(["run", str(scene), "--out", str(out)]) == 0
-    assert "replacing" not in capsys.readouterr().out
+    assert base_run[0] == 0 and "replacing" not in base_run[1]    # a first run into a new folder
+    out = _copy_run(base_run, tmp_path / "out")                   # ... left this folder
     assert main(["run", str(scene), "--out", str(out)]) == 0
     assert capsys.readouterr().out.startswith(f"kinred run: replacing the previous run in {out};")
     (out / "notes.txt").write_text("mine")
@@ -243,7 +268,7 @@ def test_rerun_rule(tmp_path, main, capsys):
     assert "is a file" in capsys.readouterr().err
 
 
-def test_header_explains_the_atom_count(tmp_path, main, capsys):
+def test_header_explains_the_atom_count(base_run):
     """The header names N and why it is not the requested count (a tensor grid's N = ∏ N_j),
     labels ε as the a-priori quantization bound and gives T, dt, the k's and the backend."""
     from kinred.commands.run import header_lines
@@ -270,22 +295,18 @@ def test_header_explains_the_atom_count(tmp_path, main, capsys):
     sizes = [c.n_atoms for c in q.components]
     assert f"{len(sizes)} × {sizes[0]} = {q.n_atoms}" in text and q.n_atoms == sum(sizes)
     # the command prints it first (before the table), at the requested size
-    scene = tmp_path / "s.toml"
-    scene.write_text(BASE)
-    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    assert base_run[0] == 0
+    lines = base_run[1].splitlines()
     assert lines[0].startswith("kinred run: ") and lines[1].startswith("  d        2")
     assert any(line.startswith("  N        8 atoms, asked for 9: a tensor grid") for line in lines)
     assert "N = ∏ N_j = 2^3 = 8 (3 of 4 coordinates" in " ".join(" ".join(lines).split())
 
 
-def test_default_folder(tmp_path, main, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    scene = tmp_path / "tiny.toml"
-    scene.write_text(BASE)
-    assert main(["run", str(scene)]) == 0
-    assert f"report: {Path('results/run-tiny/report.html')}" in capsys.readouterr().out
-    assert (tmp_path / "results" / "run-tiny" / "summary.json").exists()
+def test_default_folder(base_run):
+    code, printed, _, cwd = base_run           # `kinred run tiny.toml` without --out, in cwd
+    assert code == 0
+    assert f"report: {Path('results/run-tiny/report.html')}" in printed
+    assert (cwd / "results" / "run-tiny" / "summary.json").exists()
 
 
 def test_python_m_kinred_run_subprocess(tmp_path):
@@ -297,13 +318,12 @@ def test_python_m_kinred_run_subprocess(tmp_path):
     assert "report:" in p.stdout and p.stderr == ""    # no progress bar when not a TTY
 
 
-def test_stage_files_without_their_index_are_not_trusted(tmp_path, main, capsys):
+def test_stage_files_without_their_index_are_not_trusted(tmp_path, main, capsys, base_run):
     # stages/config.json deleted: the old loader wrote a new index for the changed scene and
     # loaded the stale stage files (a T = 0.5 run reported for a T = 1.0 scene)
     scene = tmp_path / "s.toml"
     scene.write_text(BASE)
-    out = tmp_path / "out"
-    assert main(["run", str(scene), "--out", str(out)]) == 0
+    out = _copy_run(base_run, tmp_path / "out")      # `kinred run s.toml --out out` finished
     (out / "stages" / "config.json").unlink()
     scene.write_text(BASE.replace("t_final = 0.5", "t_final = 1.0"))
     capsys.readouterr()

@@ -421,3 +421,65 @@ def test_scene_file_page_holds_the_current_reference():
     for table, keys in TABLES.items():
         for key in keys:
             assert f"| `{key.name}` |" in body, (table, key.name)
+
+
+@pytest.mark.parametrize("table", [
+    {"dist": "beta", "params": {"a": 2.0, "b": 3.0, "loc": -0.5, "scale": 2.0}, "repeat": 6,
+     "decay": 0.8, "support": [-0.4, 1.2]},
+    {"dist": "uniform", "params": {"a": -1.0, "b": 1.0}, "repeat": 4, "decay": 1.0},
+    {"dist": "norm", "params": {"loc": 0.25, "scale": 0.5}, "repeat": 5, "decay": 1.5,
+     "support": [-1.0, 2.0]},
+], ids=["beta", "uniform", "norm"])
+def test_repeated_coordinates_are_the_laws_frozen_one_by_one(table):
+    # the copies of a [[coordinate]] table share one frozen scipy law's generator (freezing
+    # 400 laws took most of a second): each copy is the law frozen afresh, decay**r·X
+    from scipy import stats
+
+    from kinred.measures import Univariate, measure_from_dict
+
+    coords = measure_from_dict({"coordinate": [table]}).factors
+    gen, p = getattr(stats, table["dist"]), dict(table["params"])
+    if table["dist"] == "uniform":
+        p = {"loc": p["a"], "scale": p["b"] - p["a"]}
+    loc, scale = p.pop("loc", 0.0), p.pop("scale", 1.0)
+    u = np.linspace(0.0, 1.0, 41)
+    assert len(coords) == table["repeat"]
+    for r, c in enumerate(coords):
+        f = table["decay"] ** r
+        sup = table.get("support")
+        fresh = Univariate(gen(**p, loc=loc * f, scale=scale * f),
+                           support=None if sup is None else (sup[0] * f, sup[1] * f))
+        x = fresh.ppf(u)
+        assert np.array_equal(c.ppf(u), x) and np.array_equal(c.cdf(x), fresh.cdf(x)), r
+        assert c.support == fresh.support and c.dist.support() == fresh.dist.support()
+        assert (c.dist.mean(), c.dist.std()) == (fresh.dist.mean(), fresh.dist.std())
+    assert len({id(c.dist) for c in coords}) == table["repeat"]    # each copy its own law
+
+
+def test_mixture_accuracy_is_the_bisection_over_every_component():
+    # _mixture_eps counts equal-shape tensor components once per ε; the accuracy it finds is
+    # the plain bisection's, which plans every component (clouds of two shapes, one of them
+    # twice as the mill scenes' four equal clouds)
+    import math
+
+    from kinred.measures import Dirac, Mixture, TensorProduct, Uniform
+    from kinred.quantize import _planning as pl
+
+    def plain_eps(mu, atoms, rule="midpoint", node_limit=500):
+        def count(e):
+            return sum(pl._plan(m, e, None, rule, node_limit).n_atoms for m in mu.components)
+        hi = pl._coarsest_eps(mu, rule)
+        lo = hi * 1e-12
+        if count(lo) <= atoms:
+            return lo
+        for _ in range(60):
+            mid = math.sqrt(lo * hi)
+            lo, hi = (lo, mid) if count(mid) <= atoms else (mid, hi)
+        return hi
+
+    def cloud(*widths, dirac=False):
+        return TensorProduct([Uniform(0.0, w) for w in widths] + ([Dirac(0.5)] if dirac else []))
+
+    mu = Mixture([cloud(1.0, 2.0), cloud(3.0, 1.0), cloud(1.0, 2.0)],
+                 [0.3, 0.3, 0.4])
+    assert pl._mixture_eps(mu, 50, "midpoint", 500) == plain_eps(mu, 50)

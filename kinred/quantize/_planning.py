@@ -170,9 +170,25 @@ def _coarsest_eps(mu, rule) -> float:
 
 
 def _mixture_eps(mu: Mixture, atoms: int, rule: str, node_limit: int) -> float:
-    """Smallest common component accuracy whose total count fits ``atoms`` (bisection)."""
+    """Smallest common component accuracy whose total count fits ``atoms`` (bisection).
+
+    Tensor-product components of one shape (equal support widths, the same one-atom factors)
+    get equal counts at every ε: their count is computed once per ε (a mixture of four equal
+    clouds took four budgets per bisection step).
+    """
+    memo: dict = {}
+
+    def component_count(m, e):
+        if not isinstance(m, TensorProduct):
+            return _plan(m, e, None, rule, node_limit).n_atoms
+        key = (e, tuple(float(w) for w in m.support_widths()),
+               tuple(isinstance(f, Atomic) and f.n_atoms == 1 for f in m.factors))
+        if key not in memo:
+            memo[key] = _plan(m, e, None, rule, node_limit).n_atoms
+        return memo[key]
+
     def count(e):
-        return _plan(mu, e, None, rule, node_limit).n_atoms
+        return sum(component_count(m, e) for m in mu.components)
 
     hi = _coarsest_eps(mu, rule)
     need = count(hi)
