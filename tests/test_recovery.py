@@ -429,8 +429,9 @@ def test_chunked_threads_give_the_same_solutions(monkeypatch):
 
     rng = np.random.default_rng(5)
     Ms = gaussian_projections(rng, 6, 20, 200)
-    X = sparse_columns(rng, 200, 40, 600)
+    X = sparse_columns(rng, 200, 40, 300)
     Y = stack_projections(Ms) @ X
+    assert -(-X.shape[1] // sweep._CHUNK_ROWS) == 3     # the first sweeps: 3 chunks, 2 threads
     with num_threads(2):
         chunked = basis_pursuit(Ms, Y)
     with num_threads(1):
