@@ -42,19 +42,25 @@ def _clouds(seed, n, d, spread, dup):
     return X, Y
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(st.integers(0, 10**6), st.integers(2, 120), st.integers(1, 6),
        st.sampled_from([1e-3, 0.05, 1.0]), st.booleans(), st.sampled_from([1, 3, 8]))
 def test_assignment_is_the_restricted_optimum_with_feasible_tight_potentials(seed, n, d, spread,
                                                                               dup, k):
+    """Through the guarded path (a forked child with its allowance, as every large graph):
+    scipy's LAPJVsp can loop forever on ties, then the network simplex answers."""
     X, Y = _clouds(seed, n, d, spread, dup)
     a = np.full(n, 1.0 / n)
     r, c, w = _graph(X, Y, k)
-    out = solve_assignment(a, r, c, w, n)
-    assert out is not None
-    pr, pc, pm, u, v = out
-    assert np.array_equal(np.sort(pr), np.arange(n)) and np.array_equal(np.sort(pc), np.arange(n))
-    assert np.all(pm == 1.0 / n)
+    with mock.patch.object(S, "FORK_EDGES", 0), mock.patch.object(S, "ASSIGN_SECONDS", 0.3):
+        pr, pc, pm, u, v, solver = S._solve_until(a, a, r, c, w, n, n, None, None)
+    if solver == ASSIGNMENT:                                  # a permutation
+        assert np.array_equal(np.sort(pr), np.arange(n))
+        assert np.array_equal(np.sort(pc), np.arange(n)) and np.all(pm == 1.0 / n)
+    else:                                                     # stopped: the network simplex
+        assert solver.startswith(S.NETWORK_SIMPLEX)
+    np.testing.assert_allclose(np.bincount(pr, pm, n), a, rtol=1e-12)
+    np.testing.assert_allclose(np.bincount(pc, pm, n), a, rtol=1e-12)
     # the restricted optimum: POT on the same edges (a dense matrix, huge cost off the graph)
     C = np.full((n, n), 1e6)
     C[r, c] = w
@@ -62,6 +68,8 @@ def test_assignment_is_the_restricted_optimum_with_feasible_tight_potentials(see
     cost = float(np.sum(pm * np.linalg.norm(X[pr] - Y[pc], axis=1)))
     assert cost == pytest.approx(ref, rel=1e-12, abs=1e-15)
     scale = 16 * np.finfo(float).eps * (1 + np.abs(u).max() + np.abs(v).max())
+    if solver != ASSIGNMENT:                     # POT's potentials carry its pivots' round-off
+        scale = 1e-12
     assert np.min(w - u[r] - v[c]) >= -scale                 # feasible on the graph
     assert np.max(np.abs(np.linalg.norm(X[pr] - Y[pc], axis=1) - u[pr] - v[pc])) <= scale
     assert np.sum(a * u) + np.sum(a * v) == pytest.approx(cost, rel=1e-12, abs=1e-15)
@@ -95,10 +103,13 @@ def test_a_crossing_assignment_does_not_converge():
 
 
 def test_no_perfect_matching_returns_none_and_w1_falls_back_to_the_network_simplex():
+    """(and small graphs, below FORK_EDGES, never try the assignment solver: it could not be
+    stopped there)"""
     r, c, w = np.array([0, 1]), np.array([0, 0]), np.array([1.0, 2.0])
     assert solve_assignment(np.full(2, 0.5), r, c, w, 2) is None
     X, Y = _clouds(3, 400, 2, 0.05, False)
-    with mock.patch.object(S, "solve_assignment", return_value=None):
+    with mock.patch.object(S, "solve_assignment", return_value=None), \
+            mock.patch.object(S, "FORK_EDGES", 0):
         r = w1(X, Y, "sparse")
     assert r.exact and r.info["solver"] == S.NETWORK_SIMPLEX
     assert r.value == pytest.approx(float(ot.emd2([], [], cdist(X, Y))), rel=1e-12)
@@ -112,7 +123,9 @@ def test_which_problems_are_assignments():
 
 
 @pytest.mark.parametrize("d", [2, 4, 20])
-def test_w1_on_uniform_paired_clouds_uses_the_assignment_and_is_the_dense_optimum(d):
+def test_w1_on_uniform_paired_clouds_uses_the_assignment_and_is_the_dense_optimum(d,
+                                                                                  monkeypatch):
+    monkeypatch.setattr(S, "FORK_EDGES", 0)          # the assignment's graphs, at a test's size
     X, Y = _clouds(d, 1500, d, 0.05, False)
     r = w1(X, Y, "sparse")
     assert r.info["solver"] == ASSIGNMENT and ASSIGNMENT in r.note
@@ -143,3 +156,25 @@ def test_a_slow_assignment_is_stopped_and_the_network_simplex_answers(monkeypatc
     assert slow.exact and slow.value == pytest.approx(ref, rel=1e-12)
     assert slow.info["solver"].startswith(S.NETWORK_SIMPLEX)
     assert "assignment solver was stopped after its 0.5 s" in slow.note
+
+
+def test_small_graphs_solve_with_the_network_simplex():
+    X, Y = _clouds(4, 400, 2, 0.05, False)
+    r = w1(X, Y, "sparse")
+    assert r.exact and r.info["solver"] == S.NETWORK_SIMPLEX
+
+
+def test_a_looping_lapjvsp_case_is_stopped_and_answered(monkeypatch):
+    """A case on which scipy's LAPJVsp loops forever (100 atoms in R¹, found by the property
+    test): the child is stopped after its allowance and the network simplex answers."""
+    import time
+
+    X, Y = _clouds(310716, 98, 1, 1.0, False)
+    monkeypatch.setattr(S, "FORK_EDGES", 0)
+    monkeypatch.setattr(S, "ASSIGN_SECONDS", 1.0)
+    t0 = time.perf_counter()
+    r = w1(X, Y, "sparse", neighbors=3)
+    assert time.perf_counter() - t0 < 30.0
+    assert r.exact
+    assert r.value == pytest.approx(float(ot.emd2([], [], cdist(X, Y), numItermax=10**7)),
+                                    rel=1e-12)

@@ -11,6 +11,10 @@ where the network simplex takes tens of seconds. The dual potentials, which LAPJ
 return, are the shortest-path distances of the residual graph
 (:func:`kinred.distance._assign_kernels.assignment_potentials`).
 
+scipy's LAPJVsp can loop forever on ties (seen on 100 atoms in R¹; scipy gh-17269 reports
+other infinite loops): :mod:`kinred.distance._sparse` calls it only on large graphs, in a forked
+child stopped after an allowance, and otherwise solves with the network simplex.
+
 Nothing here is trusted: the plan's cost is an upper bound because the plan is a coupling, and
 the lower bound is the c-transform of the potentials over all pairs, as for every solve. A
 permutation that is not optimal on ``E`` (its potentials do not converge) falls back to the
@@ -29,7 +33,6 @@ ASSIGNMENT = "scipy's sparse Jonker–Volgenant assignment (LAPJVsp)"
 #: Edge relaxations of the potentials' search per edge of the graph before it gives up.
 WORK_PER_EDGE = 64
 
-_TINY = np.finfo(np.float64).tiny
 _EPS = np.finfo(np.float64).eps
 
 
@@ -49,12 +52,16 @@ def solve_assignment(a, rows, cols, costs, n: int):
 
     from ._assign_kernels import assignment_potentials
 
-    # zero costs (duplicate atoms) would be read as missing edges: raised to the smallest
-    # normal number, which moves every permutation's cost by at most n·1e-308
-    G = csr_array((np.maximum(costs, _TINY), (rows, cols)), shape=(n, n))
+    G = csr_array((costs, (rows, cols)), shape=(n, n))
     G.sort_indices()
+    # LAPJVsp sees every cost raised by the largest one: a constant moves every permutation's
+    # cost by n times it (same optimum); zero costs (duplicate atoms) would otherwise be read
+    # as missing edges, and on costs much smaller than 1 scipy's LAPJVsp was seen to loop
+    # forever (71 atoms in R^3 with duplicates; the same graph raised by a constant: solved)
+    shift = float(G.data.max()) if G.data.size and G.data.max() > 0 else 1.0
+    lifted = csr_array((G.data + shift, G.indices, G.indptr), shape=(n, n))
     try:
-        ri, ci = min_weight_full_bipartite_matching(G)
+        ri, ci = min_weight_full_bipartite_matching(lifted)
     except ValueError:                    # no perfect matching on E
         return None
     ri, ci = np.asarray(ri, np.int64), np.asarray(ci, np.int64)

@@ -163,12 +163,15 @@ def _solve(a, b, rows, cols, costs, n, m, num_iter_max, assignment=False):
 #: the network simplex cannot be interrupted, the child can (below it, solves take < 1 s).
 FORK_EDGES = 500_000
 
-#: The assignment solver's allowance on graphs of :data:`FORK_EDGES` edges or more, before the
-#: network simplex takes over: ``ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE·edges``. LAPJVsp is
+#: The assignment solver's allowance, before the network simplex takes over:
+#: ``ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE·edges``. It runs only on graphs of
+#: :data:`FORK_EDGES` edges or more, always in a forked child that can be stopped: LAPJVsp is
 #: fast when the optimal plan stays near the identity pairing (10⁶ atoms, 10⁷ edges: 1.5 s;
-#: the network simplex: 38 s) and slow when it moves atoms by more than their spacing (10⁵
-#: atoms of the delayed-curse scene: 44 s; the network simplex: 12 s): the allowance, about a
-#: quarter of a network-simplex solve of that size, bounds what a wrong guess costs.
+#: the network simplex: 38 s), slow when it moves atoms by more than their spacing (10⁵
+#: atoms of the delayed-curse scene: 44 s; the network simplex: 12 s), and scipy's
+#: implementation can loop forever on ties (seen on 100 atoms in R¹, cf. scipy gh-17269):
+#: the allowance, about a quarter of a network-simplex solve of that size, bounds what a
+#: wrong guess costs.
 ASSIGN_SECONDS = 2.0
 ASSIGN_SECONDS_PER_EDGE = 1e-6
 
@@ -182,14 +185,12 @@ def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
     process when the graph is large (the inputs are inherited, not copied; only the plan and
     the duals, ``O(n + m)``, come back through a pipe). Raises :class:`_SolveTimedOut`.
     An assignment problem on a large graph first gets the assignment solver's allowance
-    (:data:`ASSIGN_SECONDS`), then the network simplex."""
+    (:data:`ASSIGN_SECONDS`) in a child, then the network simplex."""
     import multiprocessing as mp
 
     args = (a, b, rows, cols, costs, n, m, num_iter_max)
     forkable = rows.size >= FORK_EDGES and "fork" in mp.get_all_start_methods()
-    if is_assignment(a, b):
-        if not forkable:
-            return _solve(*args, True)
+    if forkable and is_assignment(a, b):
         start = time.perf_counter()
         stop = start + ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE * rows.size
         try:
@@ -375,7 +376,7 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
     stopped_first = False
-    solver = ASSIGNMENT if is_assignment(a, b) else NETWORK_SIMPLEX
+    solver = NETWORK_SIMPLEX
     while True:
         it += 1
         s = time.perf_counter()
