@@ -7,6 +7,8 @@ BIN    := $(VENV)/bin
 
 .PHONY: demo test bench docs clean chromium
 
+WARM_FAILED := make test: a kernel warm-up run failed (ignored: pytest compiles on first use)
+
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
@@ -31,6 +33,10 @@ demo: $(VENV)/.installed-base
 # test needs Debian's chromium: installed here with apt when run as root, otherwise one line
 # says the command to run (kinred.report._browser.find_chromium is the one place that looks).
 test: $(VENV)/.installed-test chromium
+	@echo "make test: compiling the numba kernels (two processes; cached for the suite)"
+	@$(BIN)/python tests/_warm_kernels.py demo >/dev/null 2>&1 & pid=$$!; \
+	  $(BIN)/python tests/_warm_kernels.py fig4 >/dev/null 2>&1 || echo "$(WARM_FAILED)"; \
+	  wait $$pid || echo "$(WARM_FAILED)"
 	$(BIN)/python -m pytest -n auto --dist worksteal --durations=15
 
 chromium: $(VENV)/.installed-base
