@@ -38,6 +38,9 @@ def test_make_test_brings_chromium_and_uses_every_core():
     plan = _make("-n", "test", check=True).stdout
     assert "find_chromium" in plan and "apt-get install -y -qq chromium" in plan
     assert "pytest -n auto" in plan and "--durations" in plan
+    # the kernels are compiled once, in two processes, before pytest starts
+    warm = [plan.index(f"tests/_warm_kernels.py {g}") for g in ("demo", "fig4")]
+    assert max(warm) < plan.index("pytest -n auto")
 
 
 def test_without_chromium_and_root_one_clear_line(tmp_path):
