@@ -46,7 +46,7 @@ import numpy as np
 
 from .._validate import check_alloc
 from ..errors import NotConverged
-from ._assign import ASSIGNMENT, is_assignment, solve_assignment
+from ._assign import ASSIGNMENT, is_assignment, load_kernels, solve_assignment
 from ._bracket import _principal_axis
 from ._inputs import Pts
 from ._oned import monotone_pieces
@@ -191,6 +191,7 @@ def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
     args = (a, b, rows, cols, costs, n, m, num_iter_max)
     forkable = rows.size >= FORK_EDGES and "fork" in mp.get_all_start_methods()
     if forkable and is_assignment(a, b):
+        load_kernels()
         start = time.perf_counter()
         stop = start + ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE * rows.size
         try:
