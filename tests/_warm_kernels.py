@@ -19,9 +19,26 @@ def main(group: str) -> int:
     with tempfile.TemporaryDirectory(prefix="kinred-warm-") as out:
         if group == "demo":        # simulate, certificate, W1, report
             return kinred(["demo", "--smoke", "--no-progress", "--out", out])
-        if group == "fig4":        # projected ensembles, recovery
-            return kinred(["paper", "fig4", "--quick", "--no-progress", "--out", out])
+        if group == "fig4":        # projected ensembles, recovery; float32 pair sums
+            status = kinred(["paper", "fig4", "--quick", "--no-progress", "--out", out])
+            _mixed_precision()
+            return status
     raise SystemExit(f"unknown group {group!r}: demo or fig4")
+
+
+def _mixed_precision() -> None:
+    """The float32 kernels of ``precision="mixed"`` (differences path d ≤ 3, Gram path)."""
+    import numpy as np
+
+    from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
+
+    scenes = [[Alignment(CuckerSmale(0.8, 1.5))], [Alignment(CuckerSmale(0.8, 1.62))],
+              [AttractionRepulsion(Morse(soft=0.2)), Alignment(CuckerSmale(1.0, 0.5), on="v")]]
+    rng = np.random.default_rng(0)
+    for d in (2, 60):
+        x, v = rng.normal(size=(50, d)), rng.normal(size=(50, d))
+        for effects in scenes:
+            Scene(effects, "sum", precision="mixed").rhs(x, v)
 
 
 if __name__ == "__main__":
