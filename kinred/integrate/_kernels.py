@@ -156,6 +156,23 @@ def _flush(k, blk, part, r, acc):  # pragma: no cover - compiled
         part[k, m] = 0.0
 
 
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy", inline="always")
+def _moment(a, e, wi, blk, k, j):  # pragma: no cover - compiled
+    """One element of the fused sweeps: ``blk[k, j] += wᵢ·e``; returns the element's ``e²``,
+    ``a²`` and ``a`` for the row's sums."""
+    blk[k, j] += wi * e
+    return e * e, a * a, a
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy", inline="always")
+def _row(part, k, wi, q, p, t):  # pragma: no cover - compiled
+    """A finished row of the fused sweeps into the block's partial sums ``part[k]``."""
+    part[k, 0] += wi * q
+    part[k, 1] += wi * p
+    part[k, 2] += t
+    part[k, 3] += wi
+
+
 @njit(cache=True, nogil=True, fastmath=_FM_FUSED, boundscheck=False, error_model="numpy")
 def euler_sweep(x, dx, v, dv, h, w, shift, c, r, acc):  # pragma: no cover - compiled
     """:func:`euler_pair` and, in the same pass, the sums of :func:`sweep` of the new
@@ -183,24 +200,18 @@ def euler_sweep(x, dx, v, dv, h, w, shift, c, r, acc):  # pragma: no cover - com
             v[i, j] = vn
             a = xn + sx[j]
             e = a - cx[j]
-            blk[0, j] += wi * e
-            qx += e * e
-            px += a * a
-            tx += a
+            dq, dp, dt = _moment(a, e, wi, blk, 0, j)
+            qx += dq
+            px += dp
+            tx += dt
             b = vn + sv[j]
             f = b - cv[j]
-            blk[1, j] += wi * f
-            qv += f * f
-            pv += b * b
-            tv += b
-        part[0, 0] += wi * qx
-        part[0, 1] += wi * px
-        part[0, 2] += tx
-        part[0, 3] += wi
-        part[1, 0] += wi * qv
-        part[1, 1] += wi * pv
-        part[1, 2] += tv
-        part[1, 3] += wi
+            dq, dp, dt = _moment(b, f, wi, blk, 1, j)
+            qv += dq
+            pv += dp
+            tv += dt
+        _row(part, 0, wi, qx, px, tx)
+        _row(part, 1, wi, qv, pv, tv)
         if (i + 1) % BLOCK == 0 or i == n - 1:
             _flush(0, blk, part, r, acc)
             _flush(1, blk, part, r, acc)
@@ -232,24 +243,18 @@ def euler_sweep_v(x, v, dv, h, w, shift, c, r, acc):  # pragma: no cover - compi
             v[i, j] = vn
             a = xn + sx[j]
             e = a - cx[j]
-            blk[0, j] += wi * e
-            qx += e * e
-            px += a * a
-            tx += a
+            dq, dp, dt = _moment(a, e, wi, blk, 0, j)
+            qx += dq
+            px += dp
+            tx += dt
             b = vn + sv[j]
             f = b - cv[j]
-            blk[1, j] += wi * f
-            qv += f * f
-            pv += b * b
-            tv += b
-        part[0, 0] += wi * qx
-        part[0, 1] += wi * px
-        part[0, 2] += tx
-        part[0, 3] += wi
-        part[1, 0] += wi * qv
-        part[1, 1] += wi * pv
-        part[1, 2] += tv
-        part[1, 3] += wi
+            dq, dp, dt = _moment(b, f, wi, blk, 1, j)
+            qv += dq
+            pv += dp
+            tv += dt
+        _row(part, 0, wi, qx, px, tx)
+        _row(part, 1, wi, qv, pv, tv)
         if (i + 1) % BLOCK == 0 or i == n - 1:
             _flush(0, blk, part, r, acc)
             _flush(1, blk, part, r, acc)
@@ -275,14 +280,11 @@ def euler_sweep_one(x, dx, h, w, shift, c, r, acc):  # pragma: no cover - compil
             x[i, j] = xn
             a = xn + sx[j]
             e = a - cx[j]
-            blk[0, j] += wi * e
-            qx += e * e
-            px += a * a
-            tx += a
-        part[0, 0] += wi * qx
-        part[0, 1] += wi * px
-        part[0, 2] += tx
-        part[0, 3] += wi
+            dq, dp, dt = _moment(a, e, wi, blk, 0, j)
+            qx += dq
+            px += dp
+            tx += dt
+        _row(part, 0, wi, qx, px, tx)
         if (i + 1) % BLOCK == 0 or i == n - 1:
             _flush(0, blk, part, r, acc)
 
