@@ -18,6 +18,14 @@ DENSE_RATE_NUMPY = 8e7
 CELL_PAIR_SECONDS = 8e-8
 CELL_CANDIDATE_SECONDS = 3e-8
 CELL_CANDIDATES = {1: 1.5, 2: 2.9, 3: 6.5}
+#: The same for the compiled fused pass (``_cell_kernels.pairs_fused``: Morse, Cucker–Smale):
+#: per pair within the cutoff, per pair of a NUFFT split's near part (the transition's
+#: ``erfc`` too), per candidate. Measured on the 2-D rings of issue 24 (radius 5 and 20,
+#: N = 2·10⁴, one thread): 11–14 ns per pair for Morse, 28–31 ns for its near part, with
+#: about 2.2 candidates per pair.
+FUSED_PAIR_SECONDS = 8e-9
+FUSED_NEAR_PAIR_SECONDS = 2.4e-8
+FUSED_CANDIDATE_SECONDS = 2e-9
 #: NUFFT: seconds per spreading operation and per FFT point and ``log₂``.
 SPREAD_SECONDS = 1e-9
 FFT_SECONDS = 1e-9
@@ -29,10 +37,15 @@ def dense_seconds(n: int, dim: int, sources: int, compiled: bool) -> float:
     return sources * n * (n - 1) / 2.0 * max(1.0, (dim + 1) / 4.0) / rate
 
 
-def cell_seconds(pairs: float, k: int, terms: int = 1) -> float:
-    """The cell list's pairs within the cutoff (``terms`` kernels evaluated on each)."""
-    return terms * pairs * CELL_PAIR_SECONDS + pairs * CELL_CANDIDATES.get(k, 3.0 ** k) \
-        * CELL_CANDIDATE_SECONDS
+def cell_seconds(pairs: float, k: int, terms: int = 1, fused: bool = False,
+                 near: bool = False) -> float:
+    """The cell list's pairs within the cutoff (``terms`` kernels evaluated on each); ``fused``:
+    by the compiled fused pass, ``near``: the near part of a NUFFT split."""
+    cand = pairs * CELL_CANDIDATES.get(k, 3.0 ** k)
+    if fused:
+        rate = FUSED_NEAR_PAIR_SECONDS if near else FUSED_PAIR_SECONDS
+        return terms * pairs * rate + cand * FUSED_CANDIDATE_SECONDS
+    return terms * pairs * CELL_PAIR_SECONDS + cand * CELL_CANDIDATE_SECONDS
 
 
 def nufft_seconds(n: int, dim: int, modes: int, eps: float, k: int) -> float:

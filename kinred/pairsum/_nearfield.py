@@ -37,7 +37,7 @@ from ..errors import TooLarge
 from . import _cost, _fastsum
 from .cells import kernel_values
 
-__all__ = ["Split", "split"]
+__all__ = ["Split", "split", "prefer_split"]
 
 #: The regularized region starts at ``A_FRACTION · ε_I``.
 A_FRACTION = 0.25
@@ -119,6 +119,47 @@ def _tau(phi, eps_i, dmax, tol, kappa, name):
                                                                           kappa)))
 
 
+def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, fused) -> list:
+    """The ladder's radii by estimated cost: ``(seconds, ε_I, τ, φ_F, κ_F)``, cheapest first
+    (``inf`` for a grid estimated beyond ``max_modes``)."""
+    n, k = s.shape
+    dmax = float(np.sqrt(np.sum(ext * ext)))
+    ladder = [1.0] if dmax == 0.0 else [dmax * 2.0 ** -j for j in LADDER]
+    dist = _pair_distances(s)
+    npairs = n * (n - 1) / 2.0
+    ranked = []
+    for eps_i in ladder:
+        frac = float(np.mean(dist < eps_i)) if dist.size else 0.0
+        kap = _far_kappa(phi, dist, eps_i, kappa, name)
+        tau = _tau(phi, eps_i, dmax, tol, kap, name)
+        modes = _modes_estimate(eps_i, tau, ext, tol, max_modes)
+        cost = _cost.cell_seconds(frac * npairs, k, fused=fused, near=True) + (
+            _cost.nufft_seconds(n, dim, modes, tol * tau, k) if modes else math.inf)
+        ranked.append((cost, eps_i, tau, far_profile(phi, eps_i, tau), kap))
+    ranked.sort(key=lambda r: r[0])
+    return ranked
+
+
+def _fused(kernels: tuple) -> bool:
+    """Whether the near part runs in the compiled fused pass (one kernel with a closed form)."""
+    return len(kernels) == 1 and kernel_values(kernels[0]).fused is not None
+
+
+def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kinf: float,
+                 kappa: float, max_modes: int, name: str, dim: int) -> bool:
+    """Whether the split's cheapest radius is estimated cheaper than one grid of the whole
+    kernel (its modes from the 1-D slices, ``_fastsum.estimate_modes``): a kernel whose soft
+    core is narrow against the cloud (the 2-D D'Orsogna ring of issue 24 at N = 2·10⁴) is
+    cheaper split; at N = 10⁶ its near pairs cost more than the single grid."""
+    n, k = s.shape
+    single = _fastsum.estimate_modes(phi, ext, tol, kinf, kappa, max_modes, name)
+    if single is None:
+        return True
+    eps = _fastsum.finufft_eps(tol, kappa, kinf)
+    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))[0][0]
+    return best < _cost.nufft_seconds(n, dim, single, eps, k)
+
+
 def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa: float,
           max_modes: int, name: str, dim: int) -> Split:
     """The near-field split of least estimated cost for the cloud ``s`` (module notes).
@@ -128,26 +169,8 @@ def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa
     TooLarge
         When no radius of the ladder gives a grid within ``max_modes`` (the last error).
     """
-    n, k = s.shape
     dmax = float(np.sqrt(np.sum(ext * ext)))
-    if dmax == 0.0:
-        ladder = [1.0]
-    else:
-        ladder = [dmax * 2.0 ** -j for j in LADDER]
-    dist = _pair_distances(s)
-    npairs = n * (n - 1) / 2.0
-    ranked = []
-    for eps_i in ladder:
-        frac = float(np.mean(dist < eps_i)) if dist.size else 0.0
-        pairs = frac * npairs
-        kap = _far_kappa(phi, dist, eps_i, kappa, name)
-        tau = _tau(phi, eps_i, dmax, tol, kap, name)
-        phi_f = far_profile(phi, eps_i, tau)
-        modes = _modes_estimate(eps_i, tau, ext, tol, max_modes)
-        cost = _cost.cell_seconds(pairs, k) + (
-            _cost.nufft_seconds(n, dim, modes, tol * tau, k) if modes else math.inf)
-        ranked.append((cost, eps_i, tau, phi_f, kap))
-    ranked.sort(key=lambda r: r[0])
+    ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))
     last = None
     for cost, eps_i, tau, phi_f, kap in [r for r in ranked if math.isfinite(r[0])][:TRIES]:
         kinf_f = float(np.max(np.abs(_fastsum._profile(phi_f, np.linspace(0.0, dmax, 4097),

@@ -27,7 +27,7 @@ from .._validate import as_float, max_bytes_limit
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
-from ._base import PairTerms, check_plan_args
+from ._base import PairTerms, check_plan_args, pair_form
 from .cells import TRUNC_FACTOR, CellList, cell_scales, cutoff_radius
 from .dense import Dense
 from .nufft import NUFFT, ensure_grid
@@ -202,7 +202,8 @@ def _nufft_cost(plan: AutoPlan, state: dict, nt: int) -> float:
         total += _cost.nufft_seconds(plan.n, plan.dim, math.prod(grid.modes), grid.eps, plan.dim)
         if g.split is not None:
             frac = float(np.mean(_pair_d2(s) < g.split.radius ** 2))
-            total += _cost.cell_seconds(frac * plan.n * (plan.n - 1) / 2.0, plan.dim)
+            total += _cost.cell_seconds(frac * plan.n * (plan.n - 1) / 2.0, plan.dim,
+                                        fused=g.split.near.fused is not None, near=True)
     plan.candidates["nufft"] = (backend, sub, "")
     return total / nt
 
@@ -231,5 +232,6 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
         if R == 0.0:
             continue
         frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)
-        total += _cost.cell_seconds(frac * n * (n - 1) / 2.0, k, len(src.terms))
+        fused = sub.compiled and all(pair_form(t.kernel) is not None for t in src.terms)
+        total += _cost.cell_seconds(frac * n * (n - 1) / 2.0, k, len(src.terms), fused)
     return total / nt

@@ -334,7 +334,10 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
         kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
         if kinf == 0.0:                      # the kernel vanishes on every difference
             return None
-        split = plan.near_field is True or not g.smooth
+        split = plan.near_field is True or not g.smooth or (
+            plan.near_field is None and _nearfield.prefer_split(
+                g.phi, g.kernels, s, ext, plan.tol, kinf, kappa, plan.max_modes, g.name,
+                plan.dim))
         if not split:
             try:
                 grid = _fastsum.build_grid(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes,
