@@ -37,7 +37,7 @@ from ..errors import TooLarge
 from . import _cost, _fastsum
 from .cells import kernel_values
 
-__all__ = ["Split", "split", "prefer_split"]
+__all__ = ["Split", "split", "prefer_split", "estimate"]
 
 #: The regularized region starts at ``A_FRACTION · ε_I``.
 A_FRACTION = 0.25
@@ -143,6 +143,12 @@ def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, fused) -> list:
 def _fused(kernels: tuple) -> bool:
     """Whether the near part runs in the compiled fused pass (one kernel with a closed form)."""
     return len(kernels) == 1 and kernel_values(kernels[0]).fused is not None
+
+
+def estimate(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa: float,
+             max_modes: int, name: str, dim: int) -> float:
+    """The estimated seconds of the cheapest radius of the ladder (no grid built)."""
+    return _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))[0][0]
 
 
 def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kinf: float,

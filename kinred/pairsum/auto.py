@@ -30,7 +30,7 @@ from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args, pair_form
 from .cells import TRUNC_FACTOR, CellList, cell_scales, cutoff_radius
 from .dense import Dense
-from .nufft import NUFFT, ensure_grid
+from .nufft import NUFFT, ensure_grid, group_estimate
 
 __all__ = ["Auto", "AutoPlan", "costs"]
 
@@ -40,6 +40,13 @@ REDECIDE = 1.25
 #: Dense estimated below this many seconds is chosen without estimating the others (their
 #: estimates would build NUFFT grids, which costs more than such a right-hand side).
 DENSE_ENOUGH = 0.02
+#: NUFFT grids are not built to estimate a candidate whose cheap estimate (no grid:
+#: ``nufft.group_estimate``) exceeds this many times the best other estimate or
+#: ``max_seconds`` (the 3-D slab of issue 24, N = 3·10⁴: 5 s of grid building for a
+#: candidate estimated 8 s against Dense's 3 s).
+CLEAR_LOSS = 2.0
+#: Default ``max_seconds``: no candidate estimated within it is refused (TooLarge).
+MAX_SECONDS = 60.0
 _SEED = 0xA070
 
 
@@ -74,6 +81,13 @@ class Auto:
     tol : float
         The accuracy asked of the approximate candidates (NUFFT, CellList), ``0 < tol < 1``.
         Dense is exact.
+    max_seconds : float
+        When even the cheapest candidate is estimated beyond this many seconds per
+        right-hand side (default 60), :meth:`choose` refuses (:class:`~kinred.errors.TooLarge`,
+        naming every estimate) instead of starting it – e.g. the 2-D D'Orsogna ring of
+        radius 20 at N = 10⁶, tol 1e-6 (issue 24): a near field of about 7·10⁹ pairs, some
+        200 s per right-hand side, which used to run unannounced. Raise it to run such a
+        size anyway, or pick the backend explicitly.
 
     Examples
     --------
@@ -90,11 +104,13 @@ class Auto:
     #: It may choose an approximate backend (NUFFT, CellList): certificates refuse it.
     exact = False
 
-    def __init__(self, tol: float = 1e-6):
+    def __init__(self, tol: float = 1e-6, max_seconds: float = MAX_SECONDS):
         self.tol = as_float(tol, "tol", low=0.0, high=1.0, low_open=True, high_open=True)
+        self.max_seconds = as_float(max_seconds, "max_seconds", low=0.0, low_open=True)
 
     def __repr__(self) -> str:
-        return f"Auto(tol={self.tol!r})"
+        extra = "" if self.max_seconds == MAX_SECONDS else f", max_seconds={self.max_seconds!r}"
+        return f"Auto(tol={self.tol!r}{extra})"
 
     def plan(self, scene, n: int, dim: int) -> AutoPlan:
         """The candidates' plans (a candidate that cannot run the scene is kept with why)."""
@@ -134,11 +150,19 @@ class Auto:
         with plan.lock:
             ext = {s: np.ptp(state[s], axis=0) for s in plan.terms.sources}
             if plan.chosen is None or not _same_shape(ext, plan.ext):
-                plan.estimates = costs(plan, state)
+                plan.estimates = costs(plan, state, self.max_seconds)
                 plan.chosen = min(plan.estimates, key=lambda k: (plan.estimates[k], k != "dense"))
                 plan.ext, plan.decisions = ext, plan.decisions + 1
                 if not math.isfinite(plan.estimates[plan.chosen]):
                     _refuse(plan)
+                if plan.estimates[plan.chosen] > self.max_seconds:
+                    est = ", ".join(f"{k} {v:.3g} s" for k, v in plan.estimates.items())
+                    plan.chosen = None
+                    raise TooLarge(f"pairsum='auto': every deterministic backend is estimated "
+                                   f"beyond max_seconds={self.max_seconds:g} per right-hand "
+                                   f"side for {plan.n} agents in dimension {plan.dim} ({est}); "
+                                   "raise tol or max_seconds (Auto(max_seconds=...)), choose "
+                                   "a backend explicitly, or ask for pairsum='random_batch'")
             return plan.chosen
 
 
@@ -169,8 +193,9 @@ def _refuse(plan: AutoPlan) -> None:
                    "pairsum='random_batch' (an unbiased approximation, explicit only)")
 
 
-def costs(plan: AutoPlan, state: dict) -> dict:
-    """Estimated seconds of one right-hand side per candidate (``inf``: cannot run)."""
+def costs(plan: AutoPlan, state: dict, max_seconds: float = MAX_SECONDS) -> dict:
+    """Estimated seconds of one right-hand side per candidate (``inf``: cannot run); the
+    NUFFT's grids are built only when its cheap estimate may win (:data:`CLEAR_LOSS`)."""
     n, dim, terms = plan.n, plan.dim, plan.terms
     nt = max(1, _parallel.get_num_threads())
     out = {"dense": math.inf}
@@ -180,15 +205,23 @@ def costs(plan: AutoPlan, state: dict) -> dict:
     if out["dense"] <= DENSE_ENOUGH:     # nothing to gain: do not build the others' grids
         out["nufft"] = out["cells"] = math.inf
         return out
-    out["nufft"] = _nufft_cost(plan, state, nt)
     out["cells"] = _cells_cost(plan, state, nt)
+    bound = CLEAR_LOSS * min(out["dense"], out["cells"], max_seconds)
+    out["nufft"] = _nufft_cost(plan, state, nt, bound)
     return {k: (v + OVERHEAD[k] if math.isfinite(v) else v) for k, v in out.items()}
 
 
-def _nufft_cost(plan: AutoPlan, state: dict, nt: int) -> float:
+def _nufft_cost(plan: AutoPlan, state: dict, nt: int, bound: float = math.inf) -> float:
     backend, sub, why = plan.candidates["nufft"]
     if sub is None:
         return math.inf
+    cheap = 0.0
+    for g in sub.groups:         # groups whose grid would be built: estimate without it
+        s = np.asarray(state[g.source], dtype=float)
+        if g.grid is None or not g.grid.fits(np.ptp(s, axis=0)):
+            cheap += group_estimate(sub, g, s)
+    if cheap / nt > bound:
+        return cheap / nt
     total = 0.0
     for g in sub.groups:
         s = np.asarray(state[g.source], dtype=float)

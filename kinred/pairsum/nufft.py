@@ -18,6 +18,7 @@ gets a new grid with 25 % headroom, one that shrank 4× a smaller one).
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass, field
 
@@ -26,7 +27,7 @@ import numpy as np
 from .._validate import as_float, as_int
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
-from . import _fastsum, _nearfield
+from . import _cost, _fastsum, _nearfield
 from ._base import PairTerms, check_plan_args
 from .cells import near_sums
 
@@ -354,6 +355,30 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
         g.grid, g.builds = grid, g.builds + 1
     return grid
 
+
+
+def group_estimate(plan: NUFFTPlan, g: _Group, s: np.ndarray) -> float:
+    """Estimated seconds of one group's sums on the cloud ``s`` without building a grid
+    (milliseconds: the 1-D slices of the single grid, the near-field ladder's closed forms),
+    the cheaper of what :func:`ensure_grid` may build; ``inf`` when neither fits."""
+    ext = np.ptp(s, axis=0)
+    if not np.all(np.isfinite(ext)):
+        return 0.0
+    kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+    if kinf == 0.0:
+        return 0.0
+    n, k = s.shape
+    best = math.inf
+    if g.smooth and plan.near_field is not True:
+        modes = _fastsum.estimate_modes(g.phi, ext, plan.tol, kinf, kappa, plan.max_modes,
+                                        g.name)
+        if modes is not None:
+            best = _cost.nufft_seconds(n, plan.dim, modes,
+                                       _fastsum.finufft_eps(plan.tol, kappa, kinf), k)
+    if plan.near_field is not False or not g.smooth:
+        best = min(best, _nearfield.estimate(g.phi, g.kernels, s, ext, plan.tol, kappa,
+                                             plan.max_modes, g.name, plan.dim))
+    return best
 
 
 def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
