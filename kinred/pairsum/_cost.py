@@ -20,11 +20,11 @@ CELL_CANDIDATE_SECONDS = 3e-8
 CELL_CANDIDATES = {1: 1.5, 2: 2.9, 3: 6.5}
 #: The same for the compiled fused pass (``_cell_kernels.pairs_fused``: Morse, Cucker–Smale):
 #: per pair within the cutoff, per pair of a NUFFT split's near part (the transition's
-#: ``erfc`` too), per candidate. Measured on the 2-D rings of issue 24 (radius 5 and 20,
-#: N = 2·10⁴, one thread): 11–14 ns per pair for Morse, 28–31 ns for its near part, with
-#: about 2.2 candidates per pair.
-FUSED_PAIR_SECONDS = 8e-9
-FUSED_NEAR_PAIR_SECONDS = 2.4e-8
+#: ``erfc`` too), per candidate. Measured on the 2-D ring of issue 24 (radius 20,
+#: N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns for its near part,
+#: with about 2.1 candidates per pair.
+FUSED_PAIR_SECONDS = 1.8e-8
+FUSED_NEAR_PAIR_SECONDS = 5e-8
 FUSED_CANDIDATE_SECONDS = 2e-9
 #: NUFFT: seconds per spreading operation and per FFT point and ``log₂``.
 SPREAD_SECONDS = 1e-9

@@ -173,6 +173,8 @@ def _register_builtins():
     register_pairsum("auto", _auto, keys=(
         Key("tol", "number", 1e-6, "target relative accuracy of the approximate candidates",
             low=0.0, high=1.0, low_open=True, high_open=True),
+        Key("max_seconds", "number", 60.0, "refuse (TooLarge) when every candidate is "
+            "estimated beyond this many seconds per right-hand side", low=0.0, low_open=True),
     ), doc="the deterministic backend (dense, nufft, cells) of least estimated cost for each "
            "system and cloud, re-chosen when the cloud changes shape; never random_batch")
     _BUILTIN.update(_PAIRSUMS)

@@ -12,7 +12,10 @@ times those it was made for, and it is said: :meth:`AutoPlan.info`, ``Scene.info
 The cost model (seconds per right-hand side, :mod:`kinred.pairsum._cost`): Dense by its
 pairs; CellList by the pairs within its cutoff (their fraction among 4096 sampled pairs) and
 the candidates of its stencil; NUFFT by its transforms, with its grids built for the cloud
-(kept if it is chosen) – including the near-field split when a kernel needs one.
+(kept if it is chosen) – including the near-field split when a kernel needs one or it is
+cheaper – but first estimated without any grid (``nufft.group_estimate``: milliseconds),
+and its grids are not built when that estimate loses clearly (:data:`CLEAR_LOSS`). When
+even the cheapest candidate is estimated beyond ``max_seconds`` the size is refused.
 """
 
 from __future__ import annotations

@@ -179,10 +179,12 @@ class NUFFT:
         The near-field split (``kinred.pairsum._nearfield``): the kernel regularized inside a
         near radius ``ε_I`` on a coarse grid, the rest summed exactly over the pairs closer
         than ``ε_I`` (a cell list). False (default): never (today's single grid; kernels
-        need a smooth radial profile); True: always; None: when needed – a kernel without a
-        smooth profile (its cusp goes to the near part, e.g. Morse with ``soft = 0``) or a
-        single grid beyond ``max_modes`` (``pairsum="auto"`` uses None). ``ε_I`` is chosen
-        by a cost model of near pairs against modes; the error control is the grid's.
+        need a smooth radial profile); True: always; None: when needed or cheaper – a
+        kernel without a smooth profile (its cusp goes to the near part, e.g. Morse with
+        ``soft = 0``), a single grid beyond ``max_modes``, or a split estimated cheaper than
+        the single grid (``_nearfield.prefer_split``: a soft core narrow against the cloud
+        and few enough near pairs; ``pairsum="auto"`` uses None). ``ε_I`` is chosen by a
+        cost model of near pairs against modes; the error control is the grid's.
     max_modes : int
         Limit on the Fourier modes of one grid (default ``2**20``: ``1024²`` in 2-D, ``101³``
         in 3-D, a few hundred MB of transform arrays). A cloud that needs more (e.g. a 3-D
