@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from kinred.certify import Certificate, CertificateObserver, certify
@@ -461,6 +461,10 @@ def test_certified_bounds_hold_alignment_family(case):
 
 @settings(max_examples=150)
 @given(_cases("morse"))
+@example((Scene([AttractionRepulsion(Morse(0.0, 1.0, 0.0, 1.0, soft=1.0)),   # subnormal b:
+                 SelfPropulsion(1.0, 2.2250738585e-313)], normalize="mean"),  # a²/(2b) = inf
+          np.array([[0.34558419]]), np.array([[-0.01321049]]), np.array([[0.06404227]]),
+          0.01, 1, "fast"))
 def test_certified_bounds_hold_morse_self_propulsion_family(case):
     _check_valid(case)
 

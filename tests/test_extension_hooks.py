@@ -287,6 +287,11 @@ def test_built_in_hooks_declare_todays_numbers():
     assert hooks.energy_term(sp, frame="absolute", target="v", dim=3).p == 1.0   # a²/(2b)
     assert hooks.energy_term(SelfPropulsion(2.0, 0.0), frame="absolute", target="v",
                              dim=3).kappa == 2.0
+    # a subnormal b: a²/(2b) overflows; the growth-rate bound κ = a holds for every b ≥ 0
+    # (hypothesis found b = 2.2250738585e-313 in test_certify, where the hook returned p = inf)
+    tiny = hooks.energy_term(SelfPropulsion(1.0, 2.2250738585e-313), frame="absolute",
+                             target="v", dim=1)
+    assert (tiny.p, tiny.kappa) == (0.0, 1.0)
     assert hooks.energy_term(Noise(0.5), frame="centred", target="v", dim=4).p == 1.0
     assert hooks.energy_term(Noise(0.5), frame="centred", target="x", dim=4) is None
     dr = Drift([3.0, 4.0])

@@ -46,6 +46,8 @@ nonlinearity, e.g. acting on a single coordinate) is not in class (1.1) and is r
 
 from __future__ import annotations
 
+import math
+
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -269,15 +271,17 @@ class SelfPropulsion(Effect):
 
     def energy_term(self, *, frame, target, dim) -> EnergyTerm | None:
         """``d/dt Σᵢwᵢ|vᵢ|² ≤ 2 Σᵢwᵢ(a|vᵢ|² − b|vᵢ|⁴)``: ``p = a²/(2b)`` (``b > 0``), ``κ = a``
-        (``b = 0``), nothing for ``a ≤ 0``; absolute frame only (it is not Galilean
-        invariant)."""
+        (``b = 0``, or ``a²/(2b)`` beyond the floats: a subnormal ``b``; ``−b|vᵢ|⁴ ≤ 0`` makes
+        it a bound for every ``b ≥ 0``), nothing for ``a ≤ 0``; absolute frame only (it is not
+        Galilean invariant)."""
         if frame != "absolute":
             return None
         a, b = self.a, self.b
-        if b > 0 and a > 0:
-            return EnergyTerm(p=a * a / (2.0 * b), why=f"self-propulsion adds at most a²/(2b) "
-                                                       f"= {a * a / (2.0 * b):.3g} per unit time")
-        if b == 0 and a > 0:
+        p = a * a / (2.0 * b) if b > 0 else math.inf
+        if a > 0 and math.isfinite(p):
+            return EnergyTerm(p=p, why=f"self-propulsion adds at most a²/(2b) "
+                                       f"= {p:.3g} per unit time")
+        if a > 0:
             return EnergyTerm(kappa=a, why=f"self-propulsion grows it at most at the rate 2a "
                                            f"= {2 * a:.3g}")
         return EnergyTerm()
