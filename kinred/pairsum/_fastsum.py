@@ -366,10 +366,10 @@ def _measure(phi, E, t, xt, C, xi, target, max_modes, name, budget=None):
 
 
 def _too_large(name, ext, tol, modes, max_modes, k) -> TooLarge:
-    # ``modes`` is a lower estimate, or inf when the widest axis alone needs more than
-    # ``max_modes`` (the 1-D search stops there): then only that bound is known
+    # ``modes`` is a lower estimate, or inf when the 1-D slices alone need more than
+    # ``max_modes`` (the 1-D search stops there, :func:`_slice_cap`): only that bound is known
     need = (f"more than max_modes={fmt_count(max_modes)} Fourier modes for tol={tol:g}: the "
-            "widest axis alone needs more" if not math.isfinite(modes) else
+            "axes' 1-D slices alone need more" if not math.isfinite(modes) else
             f"at least {fmt_count(int(modes))} Fourier modes for tol={tol:g}, more than "
             f"max_modes={fmt_count(max_modes)}")
     return TooLarge(
@@ -378,6 +378,27 @@ def _too_large(name, ext, tol, modes, max_modes, k) -> TooLarge:
         f"(max_modes means about {fmt_bytes(grid_bytes(max_modes, k, 2))} of transform "
         "arrays); raise tol or max_modes, or use the Dense backend for so spread a "
         "cloud")
+
+
+def _slice_count(E: np.ndarray, t: float, m: int) -> int:
+    """The grid's modes when the widest axis' slice needs ``m`` half-modes."""
+    big = float(E.max()) + t
+    return math.prod(2 * math.floor(m * ((float(e) + t) / big)) + 1 for e in E)
+
+
+def _slice_cap(E: np.ndarray, t: float, max_modes: int) -> int:
+    """The smallest half-mode count ``M`` of the widest axis' slice (period ``2(max E + t)``)
+    whose grid, ``Πₐ (2⌊M (Eₐ + t)/(max E + t)⌋ + 1)`` modes, exceeds ``max_modes``: the 1-D
+    search need not sample beyond it (the other axes count too: a 3-D cloud at 2²⁰ modes
+    stops near 50 half-modes, not at 2²⁰)."""
+    lo, hi = 0, max(1, int(max_modes))       # count(hi) ≥ 2·hi + 1 > max_modes
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if _slice_count(E, t, mid) > max_modes:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
 
 
 def _width_search(phi, E, target, xt, max_modes, name, xi_min=0.0):
@@ -394,8 +415,10 @@ def _width_search(phi, E, target, xt, max_modes, name, xi_min=0.0):
         if j not in guess:
             t = big * 2.0 ** j
             C = _centre_value(phi, E, t, name)
-            xi = _bandwidth_1d(phi, big, t, xt, C, target, max_modes, name, xi_min)
-            est = math.inf if xi is None else math.prod(
+            cap = _slice_cap(E, t, max_modes)
+            xi = _bandwidth_1d(phi, big, t, xt, C, target, cap, name, xi_min)
+            # beyond the cap: the grid at the cap is a lower estimate (it exceeds max_modes)
+            est = _slice_count(E, t, cap) if xi is None else math.prod(
                 2 * math.floor(xi * (e + t) / math.pi) + 1 for e in E)
             guess[j] = (est, t, C, xi)
         return guess[j][0]
