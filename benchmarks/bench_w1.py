@@ -6,7 +6,8 @@ Three parts (``python benchmarks/bench_w1.py [--quick] [--scaling] [--acceptance
 * ``--scaling [--max-n N]`` -- N from 10³ to ``--max-n`` (default 10⁶): paired clouds in ℝ⁴,
   ``X ~ N(0, diag(1, 1, .3, .3))``, ``Y = X + 0.01·noise + 0.005`` (issue 22's case): wall time
   and certified relative gap ``(upper − lower)/upper`` of each method (exact dense up to 4000
-  atoms, exact-lazy up to 2000, sparse, bracket up to 10⁵, paired bracket); ``--figure P``
+  atoms, exact-lazy up to 2000, sparse, bracket up to 10⁵, paired bracket without and with
+  its dual lower bound, ``dual_seconds=60``); ``--figure P``
   draws them (docs/img/w1_methods.png is ``--scaling --max-n 100000 --figure ...``);
 * ``--acceptance`` -- issue 22's four timings (a budget of 240 s each), each in its own
   process (peak memory from ``getrusage``): paired ℝ⁴ N = 10⁵ (≤ 10 s) and 10⁶ (≤ 60 s,
@@ -126,11 +127,13 @@ def scaling(max_n: int, figure=None):
     print(f"{'N':>8} {'method':<15} {'time [s]':>9} {'W1 or [lower, upper]':>40} {'gap':>9}")
     for n in sizes:
         x, y = paired_r4(n)
-        for m in ("exact", "exact-lazy", "sparse", "bracket", "paired-bracket"):
+        for m in ("exact", "exact-lazy", "sparse", "bracket", "paired-bracket", "paired+dual"):
             if n > limits.get(m, n):
                 continue
             if m == "paired-bracket":
                 r, t = _t(lambda: paired_w1_bracket(x, y, seed=0))
+            elif m == "paired+dual":
+                r, t = _t(lambda: paired_w1_bracket(x, y, seed=0, dual_seconds=60))
             else:
                 r, t = _t(lambda: w1(x, y, m, seed=0, max_bytes="6G"))
             val = f"{r.value:.12g}" if r.exact else f"[{r.lower:.8g}, {r.upper:.8g}]"
@@ -150,7 +153,7 @@ def _figure(rows, path):
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 3.8))
     floor = 1e-16
     for m, style in (("exact", "o-"), ("exact-lazy", "s-"), ("sparse", "D-"),
-                     ("bracket", "^-"), ("paired-bracket", "v-")):
+                     ("bracket", "^-"), ("paired-bracket", "v-"), ("paired+dual", "x-")):
         rs = [r for r in rows if r[1] == m]
         if not rs:
             continue
