@@ -102,8 +102,7 @@ class CTree:
 def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
                jbest: np.ndarray, tree: CTree | None = None, block: int = 512,
                deadline: float | None = None, open_rows: np.ndarray | None = None,
-               thr: np.ndarray | None = None, m: int = 1, rows: np.ndarray | None = None,
-               max_leaves: int | None = None):
+               thr: np.ndarray | None = None, m: int = 1, rows: np.ndarray | None = None):
     """Exact ``f(xᵢ) = minⱼ (|xᵢ − yⱼ| − vⱼ)`` over all ``j`` and a minimizer ``jᵢ``.
 
     ``best``/``jbest`` are an attained value and its column for every row (from the candidate
@@ -115,9 +114,7 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
     ``(N, m)`` *violators*: up to ``m`` columns of smallest value below ``thr[i]`` (``-1``
     padded; the BLAS path takes them among the ``m`` smallest of its approximate values).
     ``rows`` is the order in which the tree search takes the rows (e.g. a
-    :class:`CTree`'s ``order`` of ``X``: neighbours one after the other). ``max_leaves``
-    caps the leaves the tree search visits per row (a deterministic work budget, unlike the
-    deadline: a row cut short gets a certified lower bound, ``open_rows[i] = 1``).
+    :class:`CTree`'s ``order`` of ``X``: neighbours one after the other).
     """
     want = thr is not None
     thr = np.full(X.shape[0], -np.inf) if thr is None else np.asarray(thr, np.float64)
@@ -141,7 +138,6 @@ def ctransform(X: np.ndarray, Y: np.ndarray, v: np.ndarray, best: np.ndarray,
     for s in range(0, X.shape[0], chunk):
         late = deadline is not None and time.perf_counter() > deadline
         cap = LEAVES_PAST_DEADLINE if late else 1 << 62
-        cap = cap if max_leaves is None else min(cap, int(max_leaves))
         e = min(s + chunk, X.shape[0])
         cuts = np.linspace(s, e, get_num_threads() + 1).astype(np.int64)
         run_parallel(lambda g, r: ctransform_tree(X, tree.Ys, vs, tree.lo, tree.hi, vmax,
