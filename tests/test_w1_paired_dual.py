@@ -128,3 +128,15 @@ def test_compare_tightens_the_paired_bracket_with_the_dual_bound():
         A = np.concatenate([P.apply(sol.x[i]), P.apply(sol.v[i])], axis=1)
         B = np.concatenate([red.y[i], red.w[i]], axis=1)
         assert paired_w1_bracket(A, B, sol.weights).lower < 0.5 * exact.w1[i]
+
+
+def test_a_dual_bound_beyond_the_memory_limit_is_skipped_before_any_tree(monkeypatch):
+    """The trees are priced first (KINRED_MAX_BYTES): past the limit the sliced bound stands."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(3000, 4))
+    b = a + 1e-3 * rng.normal(size=a.shape)
+    monkeypatch.setenv("KINRED_MAX_BYTES", str(8 * 3000 * (4 * 4 + 8) - 1))
+    r = paired_w1_bracket(a, b, dual_seconds=60)
+    assert r.lower_from.startswith("max-sliced")
+    monkeypatch.setenv("KINRED_MAX_BYTES", str(8 * 3000 * (4 * 4 + 8)))
+    assert "c-transform" in paired_w1_bracket(a, b, dual_seconds=60).lower_from

@@ -222,9 +222,17 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
     from ._costs import dual_scale
     from ._search import CTree, OutOfTime, _morton_order, ctransform, use_tree
 
+    from .._validate import check_alloc
+    from ..errors import TooLarge
+
     keep = PA.weights > 0                           # zero-weight atoms are in neither support
+    n, d = int(keep.sum()), PA.dim
+    try:             # the two trees' copies and boxes, the differences, f, g, c and indices
+        check_alloc(8 * n * (4 * d + 8), "paired_w1_bracket: the dual lower bound's trees",
+                    detail=f" for {n} atoms in dimension {d}")
+    except TooLarge as exc:
+        return -math.inf, f"no dual bound ({exc})"
     A, B, w = PA.points[keep], PB.points[keep], PA.weights[keep]
-    n = A.shape[0]
     deadline = time.perf_counter() + seconds
     c = np.hypot.reduce(A - B, axis=1)
     idx = np.arange(n)
