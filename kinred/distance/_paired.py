@@ -25,13 +25,15 @@ exact W1 of the given atoms.
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._rng import as_generator
-from .._validate import as_array, as_float, as_int, as_weights
-from ..errors import InvalidInput
+from .._validate import as_array, as_float, as_int, as_weights, check_alloc
+from ..errors import InvalidInput, TooLarge
 from ._inputs import Pts, normalize_pair
 from ._result import W1Result
 
@@ -179,8 +181,6 @@ def _nearest(A: np.ndarray, B: np.ndarray, c: np.ndarray, deadline: float,
     """``fᵢ = min(cᵢ, minⱼ ‖aᵢ − bⱼ‖)``: exact nearest-neighbour queries of a
     :class:`scipy.spatial.cKDTree` of ``B`` (within ``max c``, both cores), in blocks of rows;
     past ``deadline`` the remaining rows get the certified ``0`` (``open_rows = 1``)."""
-    import time
-
     from scipy.spatial import cKDTree
 
     from .._parallel import get_num_threads
@@ -206,24 +206,18 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
 
     ``f`` is a nearest-neighbour search (:func:`_nearest`; blocked BLAS in ``d > 8`` with few
     pairs). ``g`` starts from ``‖aⱼ − bⱼ‖ − fⱼ`` (attained), so its search only looks for
-    smaller values. Both are ``≥ 0`` (``f`` is
-    a distance and ``fᵢ ≤ ‖aᵢ − bⱼ‖`` for every ``j``), so ``g`` is searched only where its
-    start value is positive (where ``aⱼ``'s nearest atom of ν is not ``bⱼ``: a few percent of
+    smaller values. Both are ``≥ 0`` (``f`` is a distance and ``fᵢ ≤ ‖aᵢ − bⱼ‖`` for every
+    ``j``), so ``g`` is searched only where its start value is positive (where ``aⱼ``'s nearest atom of ν is not ``bⱼ``: a few percent of
     the rows when displacements are small against the spacing). Past the deadline the tree
     search finishes each row with a certified lower bound of its minimum (``f + g ≤ c`` still
     holds; the note counts those rows); the BLAS search (``d > 8`` and few pairs) stops.
-    ``pad = 8ε·(upper + S)`` with ``S`` the size of the dual sum
-    (:func:`kinred.distance._costs.dual_scale`) covers the round-off of the distances and sums,
-    as in the sparse method's certificate.
+    ``pad = 8ε·(upper + S) + (d + 8)ε·(max f + max g)``: ``S`` the size of the dual sum
+    (:func:`kinred.distance._costs.dual_scale`) covers the sums, as in the sparse method's
+    certificate; the second term the computed distances (a violated pair has
+    ``|aᵢ − bⱼ| ≤ fᵢ + gⱼ``, and its distance is off by less than ``(d/2 + 2)u`` of it).
     """
-    import math
-    import time
-
     from ._costs import dual_scale
     from ._search import CTree, OutOfTime, _morton_order, ctransform, use_tree
-
-    from .._validate import check_alloc
-    from ..errors import TooLarge
 
     keep = PA.weights > 0                           # zero-weight atoms are in neither support
     n, d = int(keep.sum()), PA.dim
@@ -256,7 +250,11 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
             g[sub] = np.maximum(gs, 0.0)
     except OutOfTime:
         return -math.inf, f"the dual searches ran out of dual_seconds = {seconds:g}"
-    lower = math.fsum(w * f) + math.fsum(w * g) - 8 * _EPS * (upper + dual_scale(w, f, w, g))
+    # a pair's computed distance is off by at most ~(d/2 + 2)u of it, and a violated pair has
+    # |a_i - b_j| <= f_i + g_j: lowering g by (d + 8)eps(max f + max g) makes (f, g) feasible
+    # in exact arithmetic; 8eps(upper + S) covers the sums
+    pad = 8 * _EPS * (upper + dual_scale(w, f, w, g)) + (d + 8) * _EPS * (f.max() + g.max())
+    lower = math.fsum(w * f) + math.fsum(w * g) - pad
     cut = int(open_f.sum()) + int(open_g.sum())
     how = "" if not cut else f", {cut} of {2 * n} searches cut short by dual_seconds"
     return lower, ("dual value of the distance to nu's atoms and its c-transform over all pairs"
