@@ -53,20 +53,26 @@ def test_the_dual_bound_is_below_the_exact_w1_and_above_the_sliced_bound(case):
     tol = 1e-12 * (np.abs(a).max() + np.abs(b).max())             # POT's own round-off
     assert r.lower <= exact + tol and exact <= r.upper + tol
     assert r.lower >= sliced.lower and r.upper == sliced.upper
-    assert not r.exact and r.label == "certified bracket"
+    if r.exact:                                 # the bounds met: the index coupling is optimal
+        assert r.lower == r.value == r.upper and r.label == "exact, proved by its dual"
+        assert abs(r.value - exact) <= 1e-12 * exact + tol
+        assert float(r) == r.value
+    else:
+        assert r.label == "certified bracket" and r.upper - r.lower > 1e-13 * r.upper
+    assert not sliced.exact
 
 
 def test_small_displacements_in_high_dimension_close_the_bracket():
     """Displacements 1e-3 against a spacing of order 1 in ℝ¹⁰: the index pairing is optimal,
-    f = |a − b| and g = 0, so the bracket closes to its round-off, where the max-sliced
-    bound sees a quarter of the value."""
+    f = |a − b| and g = 0, so the bracket closes to its round-off and the value is exact,
+    proved (equal to POT's to 1e-12), where the max-sliced bound sees a quarter of it."""
     rng = np.random.default_rng(3)
     a = rng.normal(size=(2000, 10))
     b = a + 1e-3 * rng.normal(size=a.shape)
     r = paired_w1_bracket(a, b, dual_seconds=60)
     exact = w1(a, b, "exact").value
-    assert r.lower <= exact <= r.upper
-    assert (r.upper - r.lower) <= 1e-12 * exact
+    assert r.exact and abs(r.value - exact) <= 1e-12 * exact
+    assert "exact" in r.note and "c-transform" in r.note
     assert paired_w1_bracket(a, b).lower < 0.3 * exact
     assert "c-transform" in r.lower_from and "cut short" not in r.lower_from
 

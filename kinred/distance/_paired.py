@@ -41,6 +41,11 @@ _EPS = np.finfo(np.float64).eps
 
 __all__ = ["W1Bracket", "paired_w1_bracket", "MAX_AXES"]
 
+#: Relative gap at which the dual bound and the index coupling count as meeting (beyond the
+#: certificate's own round-off pad): the index coupling is then optimal and the result exact
+#: (as the sparse method's ``DEFAULT_RTOL``).
+EXACT_RTOL = 1e-13
+
 #: Coordinate axes tried at most (those with the largest mean ``|aᵢ − bᵢ|`` per coordinate).
 MAX_AXES = 64
 
@@ -64,11 +69,11 @@ class W1Bracket(W1Result):
     n_directions : int
         Directions whose exact 1-D W1 was computed.
     label : str
-        ``"certified bracket"``.
+        ``"certified bracket"``, or ``"exact, proved by its dual"`` when the bounds met.
 
     Other attributes as in :class:`W1Result` (``value`` is the midpoint, also named
-    ``midpoint``; ``float()`` refuses the bracket; ``method`` is ``"paired-bracket"``,
-    ``width = upper − lower``).
+    ``midpoint``, and ``float()`` refuses the bracket, unless ``exact``; ``method`` is
+    ``"paired-bracket"``, ``width = upper − lower``).
     """
 
     lower_from: str = ""
@@ -200,9 +205,10 @@ def _nearest(A: np.ndarray, B: np.ndarray, c: np.ndarray, deadline: float,
     return f
 
 
-def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, str]:
+def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, str, float]:
     """The certified dual lower bound ``Σ w f + Σ w g − pad`` (module docstring) of the
-    normalized paired atoms, searched within ``seconds``; ``(-inf, why)`` when it cannot be had.
+    normalized paired atoms, searched within ``seconds``, what it is, and ``pad``;
+    ``(-inf, why, 0)`` when it cannot be had.
 
     ``f`` is a nearest-neighbour search (:func:`_nearest`; blocked BLAS in ``d > 8`` with few
     pairs). ``g`` starts from ``‖aⱼ − bⱼ‖ − fⱼ`` (attained), so its search only looks for
@@ -225,7 +231,7 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
         check_alloc(8 * n * (4 * d + 8), "paired_w1_bracket: the dual lower bound's trees",
                     detail=f" for {n} atoms in dimension {d}")
     except TooLarge as exc:
-        return -math.inf, f"no dual bound ({exc})"
+        return -math.inf, f"no dual bound ({exc})", 0.0
     A, B, w = PA.points[keep], PB.points[keep], PA.weights[keep]
     deadline = time.perf_counter() + seconds
     c = np.hypot.reduce(A - B, axis=1)
@@ -249,7 +255,7 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
                                open_rows=open_g, rows=order)
             g[sub] = np.maximum(gs, 0.0)
     except OutOfTime:
-        return -math.inf, f"the dual searches ran out of dual_seconds = {seconds:g}"
+        return -math.inf, f"the dual searches ran out of dual_seconds = {seconds:g}", 0.0
     # a pair's computed distance is off by at most ~(d/2 + 2)u of it, and a violated pair has
     # |a_i - b_j| <= f_i + g_j: lowering g by (d + 8)eps(max f + max g) makes (f, g) feasible
     # in exact arithmetic; 8eps(upper + S) covers the sums
@@ -258,7 +264,7 @@ def _dual_lower(PA: Pts, PB: Pts, upper: float, seconds: float) -> tuple[float, 
     cut = int(open_f.sum()) + int(open_g.sum())
     how = "" if not cut else f", {cut} of {2 * n} searches cut short by dual_seconds"
     return lower, ("dual value of the distance to nu's atoms and its c-transform over all pairs"
-                   + how)
+                   + how), pad
 
 
 def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal: int = 3,
@@ -301,7 +307,11 @@ def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal
     -------
     W1Bracket
         ``lower``, ``upper``, ``width``, ``value`` (midpoint), ``method="paired-bracket"``,
-        ``lower_from``/``upper_from`` and ``label``; ``exact`` is False.
+        ``lower_from``/``upper_from`` and ``label``; ``exact`` is False, except with
+        ``dual_seconds`` when the dual bound meets the index coupling within
+        1e-13 relative (``EXACT_RTOL``) plus twice its round-off pad: then the index coupling
+        is optimal, ``exact`` is True, ``value = lower = upper`` its cost and ``label``
+        ``"exact, proved by its dual"``.
 
     Raises
     ------
@@ -330,14 +340,25 @@ def paired_w1_bracket(a, b, weights=None, *, n_directions: int = 16, n_principal
     PA, PB, unit = normalize_pair(A, B, w, w)
     n, d = A.shape
     D = PA.points - PB.points
-    upper = float(w @ np.hypot.reduce(D, axis=1)) * (1 + _gamma(n + d + 4)) * unit
+    # each |a_i - b_i| within d ulps (sequential hypot), one more for w_i·c_i, fsum rounds once
+    upper = math.fsum(w * np.hypot.reduce(D, axis=1)) * (1 + _gamma(d + 4)) * unit
     lower, tried, lower_from = _lower(PA, PB, D, rng, n_directions, n_principal, n_refine)
+    pad = 0.0
     if dual_seconds is not None:
-        dual, dual_from = _dual_lower(PA, PB, upper / unit, dual_seconds)
+        dual, dual_from, pad = _dual_lower(PA, PB, upper / unit, dual_seconds)
         if dual > lower:
             lower, lower_from = dual, dual_from
     lower = min(lower * unit, upper)
     upper_from = "index coupling sum_i w_i |a_i - b_i|"
+    # met: the gap is within EXACT_RTOL and the certificate's own round-off (as the sparse
+    # method's test U - L <= rtol·U + 16eps·S)
+    if dual_seconds is not None and upper - lower <= EXACT_RTOL * upper + 2 * pad * unit:
+        note = (f"exact: the {lower_from} meets the {upper_from} within {EXACT_RTOL:g} "
+                "relative, so the index coupling is optimal (proved; no linear program solved)")
+        return W1Bracket(float(upper), "paired-bracket", True, float(upper), float(upper),
+                         (n, n), note, "euclidean", lower_from=lower_from,
+                         upper_from=upper_from, n_directions=tried,
+                         label="exact, proved by its dual")
     note = (f"certified bracket: lower bound from the {lower_from}, upper bound from the "
             f"{upper_from}; no linear program solved")
     return W1Bracket(0.5 * (lower + upper), "paired-bracket", False, float(lower), float(upper),

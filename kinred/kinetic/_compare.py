@@ -112,7 +112,7 @@ def _w1_atoms(A, B, wa, wb, *, max_seconds=MAX_W1_SECONDS, seed=0):
         r = getattr(exc, "result", None)
     if paired:
         q = _paired_bracket(A, B, wa, seed, max_seconds)
-        return q if r is None else _tighter(r, q)
+        return q if r is None or q.exact else _tighter(r, q)
     return r if r is not None else w1(A, B, method="bracket", a=wa, b=wb, seed=seed)
 
 
