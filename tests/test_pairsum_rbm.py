@@ -220,6 +220,52 @@ def test_attraction_repulsion_error_shrinks_with_the_batch_size():
     assert err[n] <= 1e-12
 
 
+@pytest.mark.parametrize("n, p, block", [(23, 4, 7), (25, 4, 65536), (9, 2, 1), (31, 6, 20)])
+def test_out_arrays_are_overwritten_with_the_fresh_values_bitwise(n, p, block):
+    """``evaluate(..., out=...)`` (reused arrays holding garbage, including N mod p = 1: a lone
+    agent with no pair) returns ``out``'s arrays holding exactly the fresh result."""
+    x, v = _data(n, 3, seed=n)
+    rb = RandomBatch(p=p, block=block)
+    for sc, vv in ((_scene(rb, "mean"), v),
+                   (_scene(rb, "sum", effects=[Aggregation(Quadratic()),
+                                               Aggregation(lambda s: np.exp(-s))]), None)):
+        plan = rb.plan(sc, n, 3)
+        fresh = rb.evaluate(plan, x, vv, np.random.default_rng(5))
+        out = {t: np.full((n, 3), np.nan) for t in fresh}
+        got = rb.evaluate(plan, x, vv, np.random.default_rng(5), out=out)
+        for t in fresh:
+            assert got[t] is out[t]
+            assert np.array_equal(got[t], fresh[t])
+
+
+def test_simulate_reuses_the_sums_arrays_and_keeps_the_trajectory():
+    """simulate's Euler step takes RandomBatch's sums in arrays kept for the run
+    (VectorField.transient): two calls give the same array objects, and the trajectory is
+    bit-identical to a hand-written Euler loop on fresh arrays from the same generator."""
+    from kinred._rng import as_generator
+    from kinred.integrate import VectorField, simulate
+    n, h, steps = 41, 0.01, 6
+    x0, v0 = _data(n, 3, seed=9)
+    sc = _scene(RandomBatch(p=4), "mean", effects=EFFECTS[:2])
+    f = VectorField(sc)
+    a = f.transient(0.0, x0, v0, np.random.default_rng(1))[1]
+    b = f.transient(0.0, x0, v0, np.random.default_rng(1))[1]
+    assert a is b and f.n_evals == 2
+    assert np.array_equal(b, f(0.0, x0, v0, np.random.default_rng(1))[1])
+    assert f(0.0, x0, v0, np.random.default_rng(1))[1] is not b
+    tr = simulate(sc, x0, v0, (0.0, steps * h), h, method="euler", seed=3)
+    x, v, gen = x0.copy(), v0.copy(), as_generator(3)        # simulate's generator of seed 3
+    for _ in range(steps):
+        dx, dv = sc.rhs(x, v, rng=gen)
+        x += h * dx
+        v += h * dv
+    # simulate runs in the centred frame: equal up to the round-off of the shift
+    assert np.max(np.abs(tr.v[-1] - v)) <= 1e-12 * np.max(np.abs(v))
+    assert np.max(np.abs(tr.x[-1] - x)) <= 1e-12 * np.max(np.abs(x))
+    assert not np.allclose(tr.v[-1], simulate(sc, x0, v0, (0.0, steps * h), h,
+                                              method="euler", seed=4).v[-1])
+
+
 def test_bad_input():
     with pytest.raises(InvalidInput, match="p must"):
         RandomBatch(p=1)
@@ -244,6 +290,11 @@ def test_bad_input():
         rb.evaluate(Dense().plan(sc, 5, 2), x, v, np.random.default_rng(0))
     with pytest.raises(KinredError):
         pair_probability(5, 6)
+    g = np.random.default_rng(0)
+    for bad in (np.empty((5, 3)), np.empty((5, 2), np.float32), np.empty((2, 5)).T,
+                [[0.0] * 2] * 5):
+        with pytest.raises(InvalidInput, match=r"out\['v'\] must be a writeable C-contiguous"):
+            rb.evaluate(plan, x, v, g, out={"v": bad})
 
 
 def test_alias_and_repr():

@@ -91,8 +91,8 @@ class _Field(VectorField):
 
     last = None
 
-    def __call__(self, t, x, v, rng=None):
-        self.last = super().__call__(t, x, v, rng)
+    def _evaluate(self, t, x, v, rng, out):
+        self.last = super()._evaluate(t, x, v, rng, out)
         return self.last
 
 

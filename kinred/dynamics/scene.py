@@ -248,13 +248,18 @@ class Scene:
             dx = v.copy()
         return dx, dv
 
-    def _rhs(self, x, v, t, rng=None):
+    def _rhs(self, x, v, t, rng=None, out=None):
         """Unvalidated drift; for order 2 ``dx`` is ``v`` itself (no copy). ``rng`` goes to
-        stochastic pair-sum backends."""
+        stochastic pair-sum backends; ``out`` (``{target: array}``, for a backend that
+        ``accepts_out`` only) receives the pair sums instead of fresh arrays."""
         n = x.shape[0]
-        dv = dxe = None   # arrays owned by this call (the pairwise results are fresh arrays)
+        dv = dxe = None   # arrays owned by this call (fresh pairwise results, or ``out``'s)
         if self.pair_terms and n > 1:
-            contrib = self.pairsum.evaluate(self._plan(n, x.shape[1]), x, v, rng)
+            plan = self._plan(n, x.shape[1])
+            if out is None:
+                contrib = self.pairsum.evaluate(plan, x, v, rng)
+            else:
+                contrib = self.pairsum.evaluate(plan, x, v, rng, out=out)
             dv = contrib.get("v")
             dxe = contrib.get("x")
         for e in self._local:
@@ -271,7 +276,11 @@ class Scene:
         if self.order == 2:
             if dv is None:
                 dv = np.zeros_like(v)
-            dx = v if dxe is None else v + dxe
+            if dxe is None:
+                dx = v
+            else:               # v + dxe, in the array this call owns
+                dx = dxe
+                dx += v
         else:
             dv = None
             dx = np.zeros_like(x) if dxe is None else dxe

@@ -267,6 +267,12 @@ class PairSum(Protocol):
         first-order scenes; ``rng`` (a ``numpy.random.Generator`` or None) is for stochastic
         backends; exact ones ignore it.
 
+    A backend whose ``evaluate`` also takes ``out={target: array}`` (C-contiguous float64
+    ``(n, dim)`` arrays it overwrites and returns instead of fresh ones, with the same values)
+    declares ``accepts_out = True``; :meth:`kinred.integrate.VectorField.transient` then
+    reuses two arrays for the whole run of a one-stage method (:class:`RandomBatch` at large
+    ``N·d``, where fresh pages cost a fifth of an evaluation).
+
     A backend that draws random numbers declares the attribute ``stochastic = True``:
     :func:`~kinred.integrate.simulate` then passes the run's generator (from its ``seed``) to
     every evaluation; without it a scene without noise is deterministic and gets ``rng=None``.

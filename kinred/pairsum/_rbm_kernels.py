@@ -12,10 +12,13 @@ Kernels
 ``batch_sqdist(S, perm, p, b0, b1, out)``
     Squared distances ``‖sᵢ − sⱼ‖²`` of the pairs of batches ``[b0, b1)``, by differences,
     into ``out[:m]``. Twin: :func:`batch_pairs_numpy` and plain numpy.
-``batch_accumulate(Z, cs, perm, p, b0, b1, phi, out)``
+``batch_accumulate(Z, cs, perm, p, b0, b1, phi, out, clear)``
     ``outᵢ += csⱼ φₖ (zⱼ − zᵢ)`` and ``outⱼ += csᵢ φₖ (zᵢ − zⱼ)`` for every pair ``k = (i, j)``
     of the range: the difference of the carriers is taken directly (no centring needed: its
-    relative accuracy does not depend on where the cloud sits). Twin: :func:`batch_field_numpy`.
+    relative accuracy does not depend on where the cloud sits). With ``clear`` the rows of a
+    batch are first set to 0 (the first term of a target: the result arrays need no clearing
+    pass of their own, and the rows are cleared while in cache). Twin:
+    :func:`batch_field_numpy`.
 
 Flags as in :mod:`kinred.pairsum._kernels`: ``cache=True``, ``nogil=True``, fastmath limited
 to re-association and contraction (NaN and Inf propagate).
@@ -53,12 +56,17 @@ def batch_sqdist(S, perm, p, b0, b1, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def batch_accumulate(Z, cs, perm, p, b0, b1, phi, out):  # pragma: no cover - compiled
+def batch_accumulate(Z, cs, perm, p, b0, b1, phi, out, clear):  # pragma: no cover - compiled
     n, d = Z.shape
     k = 0
     for b in range(b0, b1):
         s0 = b * p
         s1 = min(s0 + p, n)
+        if clear:
+            for a in range(s0, s1):
+                i = perm[a]
+                for l in range(d):
+                    out[i, l] = 0.0
         for a in range(s0, s1):
             i = perm[a]
             for a2 in range(a + 1, s1):

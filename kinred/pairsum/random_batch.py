@@ -165,6 +165,9 @@ class RandomBatch:
     #: Pair sums inside random batches approximate the full ones: certificates refuse it.
     exact = False
 
+    #: ``evaluate`` writes into the caller's arrays when given ``out`` (see :class:`PairSum`).
+    accepts_out = True
+
     def __init__(self, p: int = 2, block: int | None = None):
         self.p = as_int(p, "p", low=2)
         self.block = BLOCK if block is None else as_int(block, "block", low=1)
@@ -202,14 +205,20 @@ class RandomBatch:
 
     # ------------------------------------------------------------------ evaluate
     def evaluate(self, plan: RandomBatchPlan, x: np.ndarray, v: np.ndarray | None,
-                 rng=None) -> dict:
-        """The random batch pair sums at ``(x, v)``: ``{target: (n, dim) ndarray}`` (fresh
-        arrays), from one partition drawn as ``rng.permutation(n)``.
+                 rng=None, out: dict | None = None) -> dict:
+        """The random batch pair sums at ``(x, v)``: ``{target: (n, dim) ndarray}``, from one
+        partition drawn as ``rng.permutation(n)``.
+
+        ``out`` (optional): ``{target: array}`` of C-contiguous float64 ``(n, dim)`` arrays to
+        overwrite and return instead of fresh ones (a loop that consumes the sums before the
+        next evaluation saves the fresh pages of two state-sized arrays per step:
+        :meth:`kinred.integrate.VectorField.transient`); the values are bit-identical.
 
         Raises
         ------
         InvalidInput
-            A plan of another backend or shape, or ``rng`` not a ``numpy.random.Generator``.
+            A plan of another backend or shape, ``rng`` not a ``numpy.random.Generator``, or
+            an ``out`` array of another shape or dtype.
         """
         if not isinstance(plan, RandomBatchPlan) or x.shape != (plan.n, plan.dim):
             raise InvalidInput(f"plan must be a RandomBatchPlan for states of shape (n, dim) = "
@@ -223,9 +232,23 @@ class RandomBatch:
         perm = rng.permutation(plan.n)
         state = {"x": np.ascontiguousarray(x, dtype=np.float64),
                  "v": None if v is None else np.ascontiguousarray(v, dtype=np.float64)}
-        outs = {tgt: np.zeros((plan.n, plan.dim)) for tgt in plan.targets}
+        outs = {tgt: _result_array(plan, out, tgt) for tgt in plan.targets}
         _parallel.run_parallel(partial(_share, plan, state, perm, outs), list(plan.groups))
         return outs
+
+
+def _result_array(plan: RandomBatchPlan, out: dict | None, tgt: str) -> np.ndarray:
+    """The array the sums of ``tgt`` are written to: ``out[tgt]`` when given (checked), else
+    a fresh one (every row is cleared by its chunk before it is accumulated into)."""
+    a = None if out is None else out.get(tgt)
+    if a is None:
+        return np.empty((plan.n, plan.dim))
+    if (type(a) is not np.ndarray or a.dtype != np.float64 or a.shape != (plan.n, plan.dim)
+            or not a.flags.c_contiguous or not a.flags.writeable):
+        raise InvalidInput(f"out[{tgt!r}] must be a writeable C-contiguous float64 array of "
+                           f"shape {(plan.n, plan.dim)}, got {type(a).__name__} "
+                           f"{getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}")
+    return a
 
 
 def _split(items: tuple, k: int) -> list:
@@ -244,8 +267,11 @@ def _share(plan: RandomBatchPlan, state: dict, perm: np.ndarray, outs: dict, g: 
     n, p = plan.n, plan.p
     for b0, b1 in chunks:
         m = _rbm_kernels.pairs_in(n, p, b0, b1)
-        if m == 0:
+        if m == 0:      # a lone agent (N mod p = 1): no pair, its sums are 0
+            for tgt in plan.targets:
+                outs[tgt][perm[b0 * p:min(b1 * p, n)]] = 0.0
             continue
+        cleared = set()
         for s, terms in plan.by_source:
             q = qbuf[:m]
             _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
@@ -257,4 +283,5 @@ def _share(plan: RandomBatchPlan, state: dict, perm: np.ndarray, outs: dict, g: 
                 else:
                     phi[...] = t.kernel(np.sqrt(q))
                 _rbm_kernels.batch_accumulate(state[t.carrier], plan.cs, perm, p, b0, b1, phi,
-                                              outs[t.target])
+                                              outs[t.target], t.target not in cleared)
+                cleared.add(t.target)
