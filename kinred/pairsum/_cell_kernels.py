@@ -14,11 +14,13 @@ Kernels (``cache=True``, ``nogil=True``: threads over work items run in parallel
 ``scatter_pairs(oi, oj, phi, m, Z, A)``
     ``A[i] += φ Z[j]`` and ``A[j] += φ Z[i]`` for the first ``m`` pairs (each unordered
     pair's kernel value used in both orientations). Twin: :func:`scatter_pairs_numpy`.
-``pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A)``
+``pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, tab, Z, A)``
     The three steps in one pass (buffers of one neighbour block only), for kernels with a
     closed form (``kind``: Morse ``p = (Cₐ, ℓₐ, C_r, ℓ_r, soft)``, Cucker–Smale
     ``p = (G, β)``), optionally the near part of a NUFFT split (``sp = (1, a, mid, σ, φ(a))``,
-    see ``kinred.pairsum._nearfield``). Per row and neighbour block, a branch-light distance
+    see ``kinred.pairsum._nearfield``), or for any kernel tabulated (``KIND_TABLE``, the
+    table ``tab`` of :mod:`kinred.pairsum._table`; a split's near part at about 4 ns a value
+    instead of 50). Per row and neighbour block, a branch-light distance
     loop collects the pairs within the cutoff, one tight loop per kind evaluates the kernel
     on them (reciprocals hoisted), then they are accumulated in the twin's pair order.
     Measured on the 2-D ring of radius 20, N = 2·10⁴, cutoff 1.8, one thread, idle machine:
@@ -113,15 +115,32 @@ def scatter_pairs_numpy(oi, oj, phi, m, Z, A):
     return A
 
 
-#: Kernel kinds of :func:`pairs_fused` (``kinred.pairsum._base.pair_form``).
+#: Kernel kinds of :func:`pairs_fused` (``kinred.pairsum._base.pair_form``), and a
+#: tabulated kernel (:mod:`kinred.pairsum._table`: ``p = (m/R, singular, φ(0))``, ``tab``).
 KIND_MORSE = 1
 KIND_CS = 2
+KIND_TABLE = 3
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def _values(kind, p, sp, bq, bf, c):  # pragma: no cover - compiled
+def _values(kind, p, sp, tab, bq, bf, c):  # pragma: no cover - compiled
     """``bf[t] = φ(√bq[t])`` (the near part of a split when ``sp[0] > 0``) for ``t < c``:
-    one tight loop per kind, reciprocals hoisted (one division a pair, not five)."""
+    one tight loop per kind, reciprocals hoisted (one division a pair, not five); a table
+    (``KIND_TABLE``) holds the whole function, split or not."""
+    if kind == KIND_TABLE:
+        inv_h, singular, at0 = p[0], p[1] > 0.0, p[2]
+        last = tab.shape[0] - 1
+        for t in range(c):
+            s = math.sqrt(bq[t])
+            u = s * inv_h
+            i = min(int(u), last)
+            w = u - i
+            val = ((tab[i, 3] * w + tab[i, 2]) * w + tab[i, 1]) * w + tab[i, 0]
+            if s > 0.0:
+                bf[t] = val / s if singular else val
+            else:
+                bf[t] = at0
+        return
     if kind == KIND_MORSE:
         ia, ir, s2 = 1.0 / p[1], 1.0 / p[3], p[4] * p[4]
         ca, cr = p[0] * ia, p[2] * ir
@@ -141,7 +160,7 @@ def _values(kind, p, sp, bq, bf, c):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, fastmath=_FM, boundscheck=False, error_model="numpy")
-def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: no cover
+def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, tab, Z, A):  # pragma: no cover
     k = S.shape[1]
     nh = nbr.shape[1]
     d1 = Z.shape[1]
@@ -172,7 +191,7 @@ def pairs_fused(items, S, start, count, nbr, r2, kind, p, sp, Z, A):  # pragma: 
                         continue
                     j0, j1 = start[b], start[b] + count[b]
                 c = _block(S, si, j0, j1, k, r2, bj, bq)
-                _values(kind, p, sp, bq, bf, c)     # the kernel only on the pairs within r2
+                _values(kind, p, sp, tab, bq, bf, c)  # the kernel only on the pairs within r2
                 for t in range(c):
                     j = bj[t]
                     f = bf[t]

@@ -140,6 +140,10 @@ def _items(count: np.ndarray, rowbound: np.ndarray, chunk: int) -> tuple:
     return chunks, int(max(chunk, per.max())) + 1, int(bound.sum())
 
 
+_NO_SPLIT = np.zeros(5)
+_NO_TABLE = np.zeros((1, 4))
+
+
 def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
                compiled: bool = True) -> tuple:
     """The pair sums of the grid's pairs: per thread an ``(nacc, N, d + 1)`` array (sorted
@@ -165,18 +169,25 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
     nthreads = max(1, min(nthreads, len(grid.chunks)))
     shares = [grid.chunks[g::nthreads] for g in range(nthreads)]
 
-    fused = compiled and all(getattr(fn, "fused", None) is not None for fn, _, _ in evals)
+    fused = compiled and all(getattr(fn, "fused", None) is not None
+                             or getattr(fn, "table", None) is not None for fn, _, _ in evals)
 
     def work_fused(g, mine):
         A = np.zeros((nacc, n, d1))
         pairs = 0
         for fn, z, a in evals:
-            kind = {"morse": _cell_kernels.KIND_MORSE, "cs": _cell_kernels.KIND_CS}[fn.fused[0]]
-            p = np.array(fn.fused[1], dtype=np.float64)
-            sp = fn.split if getattr(fn, "split", None) is not None else np.zeros(5)
+            table = getattr(fn, "table", None)
+            if table is not None:
+                kind, p, sp, tab = _cell_kernels.KIND_TABLE, table.params, _NO_SPLIT, table.C
+            else:
+                kind = {"morse": _cell_kernels.KIND_MORSE,
+                        "cs": _cell_kernels.KIND_CS}[fn.fused[0]]
+                p, tab = np.array(fn.fused[1], dtype=np.float64), _NO_TABLE
+                sp = fn.split if getattr(fn, "split", None) is not None else _NO_SPLIT
             for items in mine:
                 pairs += _cell_kernels.pairs_fused(items, grid.S, grid.start, grid.count,
-                                                   grid.nbr, grid.r2, kind, p, sp, Zs[z], A[a])
+                                                   grid.nbr, grid.r2, kind, p, sp, tab, Zs[z],
+                                                   A[a])
         return A, pairs // max(1, len(evals))
 
     def work(g, mine):

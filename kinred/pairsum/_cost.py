@@ -19,12 +19,14 @@ CELL_PAIR_SECONDS = 8e-8
 CELL_CANDIDATE_SECONDS = 3e-8
 CELL_CANDIDATES = {1: 1.5, 2: 2.9, 3: 6.5}
 #: The same for the compiled fused pass (``_cell_kernels.pairs_fused``: Morse, Cucker–Smale):
-#: per pair within the cutoff, per pair of a NUFFT split's near part (the transition's
-#: ``erfc`` too), per candidate. Measured on the 2-D ring of issue 24 (radius 20,
-#: N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns for its near part,
-#: with about 2.1 candidates per pair.
+#: per pair within the cutoff, per pair of a NUFFT split's near part (tabulated,
+#: :mod:`kinred.pairsum._table`), per candidate. Measured on the 2-D ring of issue 24
+#: (radius 20, N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns for its
+#: near part by its closed form with the transition's ``erfc``; the table: 11.8 ns per near
+#: pair and thread, search and accumulation included (radius 5, N = 2·10⁴, ε_I = 0.94,
+#: 1.18·10⁷ pairs in 50 ms on 2 threads).
 FUSED_PAIR_SECONDS = 1.8e-8
-FUSED_NEAR_PAIR_SECONDS = 5e-8
+FUSED_NEAR_PAIR_SECONDS = 1.2e-8
 FUSED_CANDIDATE_SECONDS = 2e-9
 #: NUFFT: seconds per spreading operation and per FFT point and ``log₂``.
 SPREAD_SECONDS = 1e-9
@@ -48,10 +50,39 @@ def cell_seconds(pairs: float, k: int, terms: int = 1, fused: bool = False,
     return terms * pairs * CELL_PAIR_SECONDS + cand * CELL_CANDIDATE_SECONDS
 
 
+#: finufft's upsampling factors kinred chooses among (finufft ≥ 2.5 takes any σ > 1).
+UPSAMPLING = (1.25, 1.5, 2.0)
+#: finufft's widest spreading kernel.
+MAX_WIDTH = 16
+
+
+def spread_width(eps: float, k: int, sigma: float) -> int:
+    """finufft 2.5's spreading width for tolerance ``eps`` in ``k`` dimensions at upsampling
+    ``σ`` (its PSWF kernel: ``⌈ln(0.18·1.4^{k−1}/ε)/(π√(1 − 1/σ)) + 1⌉``, at least 2)."""
+    eps = max(min(eps, 0.1), 1e-16)
+    w = math.ceil(math.log(0.18 * 1.4 ** (k - 1) / eps) / (math.pi * math.sqrt(1.0 - 1.0 / sigma))
+                  + 1.0)
+    return max(2, w)
+
+
+def upsampling(n: int, modes: int, eps: float, k: int) -> float:
+    """The upsampling factor ``σ`` of least estimated cost (:func:`nufft_seconds`): ``σ = 2``
+    for many points on few modes (spreading dominates), ``1.25`` for few points on many modes
+    (the FFT of ``σᵏ×`` the modes dominates: the 2-D D'Orsogna ring's far part at
+    N = 2·10⁴, 643 × 647 modes, 1.3× faster)."""
+    ok = [s for s in UPSAMPLING if spread_width(eps, k, s) <= MAX_WIDTH] or [2.0]
+    return min(ok, key=lambda s: (_transforms_seconds(n, modes, eps, k, s), -s))
+
+
+def _transforms_seconds(n, modes, eps, k, sigma) -> float:
+    w = spread_width(eps, k, sigma)
+    fine = sigma ** k * modes
+    return 2 * n * w ** k * SPREAD_SECONDS + 2 * fine * math.log2(max(fine, 2)) * FFT_SECONDS
+
+
 def nufft_seconds(n: int, dim: int, modes: int, eps: float, k: int) -> float:
     """One group's transforms: ``(d + 2)//2`` complex transform pairs, ``2 N wᵏ`` spreading
-    operations each (``w = ⌈log₁₀(1/ε)⌉ + 1``), FFTs of ``2ᵏ`` times the modes."""
-    w = math.ceil(math.log10(1.0 / max(min(eps, 0.1), 1e-16))) + 1
-    fine = (2 ** k) * modes
-    return (dim + 2) // 2 * (2 * n * w ** k * SPREAD_SECONDS
-                             + 2 * fine * math.log2(max(fine, 2)) * FFT_SECONDS)
+    operations each (``w`` = :func:`spread_width`), FFTs of ``σᵏ`` times the modes, at the
+    upsampling ``σ`` of :func:`upsampling`."""
+    sigma = upsampling(n, modes, eps, k)
+    return (dim + 2) // 2 * _transforms_seconds(n, modes, eps, k, sigma)

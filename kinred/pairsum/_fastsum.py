@@ -63,6 +63,7 @@ from scipy.special import erfc, erfcinv
 
 from .._validate import fmt_bytes, fmt_count
 from ..errors import InvalidInput, TooLarge
+from . import _cost
 
 __all__ = ["MAX_MODES", "Grid", "kernel_scales", "build_grid", "FastSum", "flat_extents"]
 
@@ -534,9 +535,12 @@ class FastSum:
         # Small mode grids stay in cache: sorting the points costs more than it saves there
         # (measured: 41² modes, 10⁶ points, 2.1× faster unsorted).
         sort = 0 if modes * 2 ** k <= 2 ** 16 else 2
+        #: finufft's upsampling factor, chosen by the cost model (:func:`_cost.upsampling`)
+        self.upsampfac = _cost.upsampling(n, modes, grid.eps, k)
         try:
             self.plan = finufft.Plan(1, grid.modes, n_trans=n_trans, eps=grid.eps, isign=-1,
-                                     nthreads=self.nthreads, modeord=0, spread_sort=sort)
+                                     nthreads=self.nthreads, modeord=0, spread_sort=sort,
+                                     upsampfac=self.upsampfac)
         except MemoryError:
             raise TooLarge(f"NUFFT: finufft could not allocate a plan for {grid.modes} modes "
                            f"and {n_trans} transforms") from None

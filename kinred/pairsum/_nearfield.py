@@ -34,7 +34,7 @@ import numpy as np
 from scipy.special import erfc, erfcinv
 
 from ..errors import TooLarge
-from . import _cost, _fastsum
+from . import _cost, _fastsum, _table
 from .cells import kernel_values
 
 __all__ = ["Split", "split", "prefer_split", "estimate"]
@@ -81,9 +81,14 @@ def far_profile(phi, eps_i: float, tau: float):
     return phi_f
 
 
-def near_kernel(kernels: tuple, phi_f):
+def near_kernel(kernels: tuple, phi_f, table_rtol: float | None = None,
+                table_kappa: float = 1.0):
     """``q ↦ Σ φ_t(√q) − φ_F(√q)``: the exact kernels (their ``value_sq``) minus the far part,
-    ``φ(s)(1 − G(s))`` for ``s ≥ a`` and ``φ(s) − G(s) φ(a)`` below (one kernel evaluation)."""
+    ``φ(s)(1 − G(s))`` for ``s ≥ a`` and ``φ(s) − G(s) φ(a)`` below (one kernel evaluation).
+
+    With ``table_rtol``, its attribute ``table`` is the function tabulated on ``[0, ε_I]``
+    within ``table_rtol·(table_kappa + |φ_N|)`` (:func:`kinred.pairsum._table.tabulate`;
+    None if no table reaches it), which the compiled pass then uses."""
     vals = [kernel_values(k) for k in kernels]
     a, G = _transition(phi_f.eps_i, phi_f.tau)
     phi_a = float(sum(v(np.array([a * a]))[0] for v in vals))
@@ -96,10 +101,15 @@ def near_kernel(kernels: tuple, phi_f):
         g = G(s)
         return np.where(s >= a, out * (1.0 - g), out - g * phi_a)
 
-    # the compiled pass: one kernel with a closed form
+    # the compiled pass: the table of φ_N (any kernels), else one kernel's closed form
     phi_n.fused = vals[0].fused if len(vals) == 1 else None
     phi_n.split = np.array([1.0, a, 0.5 * (a + phi_f.eps_i), _sigma(phi_f.eps_i, phi_f.tau),
                             phi_a])
+    phi_n.table = None
+    if table_rtol is not None:
+        phi_n.table = _table.tabulate(lambda s: phi_n(np.asarray(s, dtype=float) ** 2),
+                                      math.nextafter(phi_f.eps_i, math.inf),
+                                      table_rtol, table_kappa)
     return phi_n
 
 
@@ -119,9 +129,10 @@ def _tau(phi, eps_i, dmax, tol, kappa, name):
                                                                           kappa)))
 
 
-def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, fused) -> list:
+def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim) -> list:
     """The ladder's radii by estimated cost: ``(seconds, ε_I, τ, φ_F, κ_F)``, cheapest first
-    (``inf`` for a grid estimated beyond ``max_modes``)."""
+    (``inf`` for a grid estimated beyond ``max_modes``); the near pairs at the compiled pass's
+    cost of a tabulated near part (:func:`near_kernel`)."""
     n, k = s.shape
     dmax = float(np.sqrt(np.sum(ext * ext)))
     ladder = [1.0] if dmax == 0.0 else [dmax * 2.0 ** -j for j in LADDER]
@@ -133,22 +144,17 @@ def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, fused) -> list:
         kap = _far_kappa(phi, dist, eps_i, kappa, name)
         tau = _tau(phi, eps_i, dmax, tol, kap, name)
         modes = _modes_estimate(eps_i, tau, ext, tol, max_modes)
-        cost = _cost.cell_seconds(frac * npairs, k, fused=fused, near=True) + (
+        cost = _cost.cell_seconds(frac * npairs, k, fused=True, near=True) + (
             _cost.nufft_seconds(n, dim, modes, tol * tau, k) if modes else math.inf)
         ranked.append((cost, eps_i, tau, far_profile(phi, eps_i, tau), kap))
     ranked.sort(key=lambda r: r[0])
     return ranked
 
 
-def _fused(kernels: tuple) -> bool:
-    """Whether the near part runs in the compiled fused pass (one kernel with a closed form)."""
-    return len(kernels) == 1 and kernel_values(kernels[0]).fused is not None
-
-
 def estimate(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa: float,
              max_modes: int, name: str, dim: int) -> float:
     """The estimated seconds of the cheapest radius of the ladder (no grid built)."""
-    return _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))[0][0]
+    return _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0][0]
 
 
 def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kinf: float,
@@ -162,7 +168,7 @@ def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float
     if single is None:
         return True
     eps = _fastsum.finufft_eps(tol, kappa, kinf)
-    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))[0][0]
+    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0][0]
     return best < _cost.nufft_seconds(n, dim, single, eps, k)
 
 
@@ -176,7 +182,7 @@ def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa
         When no radius of the ladder gives a grid within ``max_modes`` (the last error).
     """
     dmax = float(np.sqrt(np.sum(ext * ext)))
-    ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, _fused(kernels))
+    ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)
     last = None
     for cost, eps_i, tau, phi_f, kap in [r for r in ranked if math.isfinite(r[0])][:TRIES]:
         kinf_f = float(np.max(np.abs(_fastsum._profile(phi_f, np.linspace(0.0, dmax, 4097),
@@ -188,7 +194,8 @@ def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa
         except TooLarge as exc:
             last = exc
             continue
-        return Split(eps_i, grid, near_kernel(kernels, phi_f), tau)
+        return Split(eps_i, grid, near_kernel(kernels, phi_f, _table.TABLE_FACTOR * tol,
+                                              kap), tau)
     raise TooLarge(f"NUFFT with a near-field split: no near radius of the ladder {LADDER[0]}"
                    f"..{LADDER[-1]} halvings of the diameter {dmax:.4g} gives a grid of the far "
                    f"part of {name} within max_modes={max_modes} at tol={tol:g}"

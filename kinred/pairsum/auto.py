@@ -239,7 +239,8 @@ def _nufft_cost(plan: AutoPlan, state: dict, nt: int, bound: float = math.inf) -
         if g.split is not None:
             frac = float(np.mean(_pair_d2(s) < g.split.radius ** 2))
             total += _cost.cell_seconds(frac * plan.n * (plan.n - 1) / 2.0, plan.dim,
-                                        fused=g.split.near.fused is not None, near=True)
+                                        fused=(g.split.near.fused is not None
+                                               or g.split.near.table is not None), near=True)
     plan.candidates["nufft"] = (backend, sub, "")
     return total / nt
 
