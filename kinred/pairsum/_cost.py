@@ -18,14 +18,15 @@ DENSE_RATE_NUMPY = 8e7
 CELL_PAIR_SECONDS = 8e-8
 CELL_CANDIDATE_SECONDS = 3e-8
 CELL_CANDIDATES = {1: 1.5, 2: 2.9, 3: 6.5}
-#: The same for the compiled fused pass (``_cell_kernels.pairs_fused``: Morse, Cucker–Smale):
-#: per pair within the cutoff, per pair of a NUFFT split's near part (tabulated,
-#: :mod:`kinred.pairsum._table`), per candidate. Measured on the 2-D ring of issue 24
-#: (radius 20, N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns for its
-#: near part by its closed form with the transition's ``erfc``; the table: 11.8 ns per near
-#: pair and thread, search and accumulation included (radius 5, N = 2·10⁴, ε_I = 0.94,
-#: 1.18·10⁷ pairs in 50 ms on 2 threads).
-FUSED_PAIR_SECONDS = 1.8e-8
+#: The same for the compiled fused pass (``_cell_kernels.pairs_fused``, every kernel through
+#: its table, :mod:`kinred.pairsum._table`): per pair within the cutoff, per pair of a NUFFT
+#: split's near part, per candidate. By closed forms (before the tables), on the 2-D ring of
+#: issue 24 (radius 20, N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns
+#: for its near part with the transition's ``erfc``. By the tables, search and accumulation
+#: included: 10.9 ns per pair and thread for Morse (2-D, D = 300, N = 10⁵, cutoff 19.2,
+#: 6.1·10⁷ pairs; 18.3 ns by its closed form), 11.8 ns per near pair (the ring of radius 5,
+#: N = 2·10⁴, ε_I = 0.94, 1.18·10⁷ pairs in 50 ms on 2 threads).
+FUSED_PAIR_SECONDS = 1.1e-8
 FUSED_NEAR_PAIR_SECONDS = 1.2e-8
 FUSED_CANDIDATE_SECONDS = 2e-9
 #: NUFFT: seconds per spreading operation and per FFT point and ``log₂``.

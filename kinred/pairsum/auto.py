@@ -30,7 +30,7 @@ from .._validate import as_float, max_bytes_limit
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
-from ._base import PairTerms, check_plan_args, pair_form
+from ._base import PairTerms, check_plan_args
 from .cells import TRUNC_FACTOR, CellList, cell_scales, cutoff_radius
 from .dense import Dense
 from .nufft import NUFFT, ensure_grid, group_estimate
@@ -269,6 +269,6 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
         if R == 0.0:
             continue
         frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)
-        fused = sub.compiled and all(pair_form(t.kernel) is not None for t in src.terms)
+        fused = sub.compiled          # every kernel through its table (cells._values)
         total += _cost.cell_seconds(frac * n * (n - 1) / 2.0, k, len(src.terms), fused)
     return total / nt

@@ -22,7 +22,7 @@ import numpy as np
 from .._validate import as_float, check_alloc
 from .. import _parallel
 from ..errors import InvalidInput
-from . import _cells, _fastsum, _kernels
+from . import _cells, _fastsum, _kernels, _table
 from ._base import PairTerms, check_plan_args, pair_form, tail_bound
 
 __all__ = ["CellList", "CellListPlan", "cutoff_radius"]
@@ -74,6 +74,8 @@ class _Source:
     ext: np.ndarray | None = None
     pairs: int = 0
     cells: int = 0
+    kappas: tuple | None = None    # per term: κ of the cloud the cutoff was derived for
+    values: tuple | None = None    # (R, per term: q ↦ φ(√q) with its table) for that R
 
 
 @dataclass(eq=False)
@@ -214,14 +216,35 @@ class CellList:
                 R = _cutoff(plan, src, s)
                 if R == 0.0:
                     continue
-                near_sums(s, R, [(kernel_values(t.kernel), zext[t.carrier],
-                                  acc[(t.target, t.carrier)]) for t in src.terms],
+                near_sums(s, R, [(fn, zext[t.carrier], acc[(t.target, t.carrier)])
+                                 for fn, t in zip(_values(plan, src, s, R), src.terms)],
                           plan.compiled, src)
         out = {}
         for (tgt, carrier), A in acc.items():
             contrib = _kernels.pair_finish(A, centred[carrier], np.empty((plan.n, plan.dim)))
             out[tgt] = out[tgt] + contrib if tgt in out else contrib
         return out
+
+
+def _values(plan: CellListPlan, src: _Source, s: np.ndarray, R: float) -> tuple:
+    """Per term of the source, ``q ↦ φ(√q)`` (:func:`kernel_values`) with, for the compiled
+    pass, its table on ``[0, R]`` (:mod:`kinred.pairsum._table`, within
+    ``TABLE_FACTOR·tol·(κ + |φ|)``: the truncation's own target is ``TRUNC_FACTOR·tol·κ``),
+    kept while the cutoff is."""
+    if src.values is not None and src.values[0] == R:
+        return src.values[1]
+    if src.kappas is None:
+        ext = s.max(axis=0) - s.min(axis=0)
+        src.kappas = tuple(cell_scales(t.kernel, s, ext)[1] for t in src.terms)
+    fns = []
+    for t, kappa in zip(src.terms, src.kappas):
+        fn = kernel_values(t.kernel)
+        if plan.compiled and kappa > 0.0:
+            fn.table = _table.tabulate(lambda r, fn=fn: fn(np.asarray(r, dtype=float) ** 2),
+                                       R, _table.TABLE_FACTOR * plan.tol, kappa)
+        fns.append(fn)
+    src.values = (R, tuple(fns))
+    return src.values[1]
 
 
 def kernel_values(kernel):
@@ -238,6 +261,7 @@ def kernel_values(kernel):
             return np.asarray(kernel(np.sqrt(q)), dtype=np.float64) * np.ones_like(q)
     values.fused = pair_form(kernel)
     values.split = None
+    values.table = None
     return values
 
 
@@ -309,12 +333,15 @@ def _cutoff(plan: CellListPlan, src: _Source, s: np.ndarray) -> float:
     if src.R is not None and np.all(ext <= REDECIDE * src.ext) and np.all(ext >= src.ext / REDECIDE):
         return src.R
     R = 0.0 if dmax > 0 else 1.0          # coincident agents: every pair at distance 0 < R
+    kappas = []
     for t, bound in zip(src.terms, src.bounds):
         kinf, kappa = cell_scales(t.kernel, s, ext)
+        kappas.append(kappa)
         if kinf == 0.0:
             continue
         # a hair beyond the cloud's diameter: every pair is within it
         if dmax > 0:
             R = max(R, cutoff_radius(bound, TRUNC_FACTOR * plan.tol * kappa, dmax * (1 + 1e-9)))
     src.R, src.ext = (math.nextafter(R, math.inf) if R > 0 else 0.0), ext
+    src.kappas = tuple(kappas)
     return src.R
