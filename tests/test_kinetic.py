@@ -104,9 +104,10 @@ def test_a_first_solve_stopped_by_the_budget_sends_later_times_to_the_paired_bra
     # no time is exact by a solve: brackets, or the paired bracket's dual meeting its coupling
     np.testing.assert_allclose(c.w1[c.exact], exact.w1[c.exact], rtol=1e-12, atol=1e-15)
     assert took < 15.0           # one stopped solve (~1 s; t = 0 is two equal clouds), not four
-    # t = 0 (equal clouds): the stopped solve's bracket gives way to the paired bracket, whose
-    # dual bound meets the index coupling (0): W1 = 0, exact
-    assert c.method == "paired-bracket" and c.exact[0] and c.w1[0] == 0.0
+    # t = 0 (equal clouds): the stopped solve falls back on the paired bracket, whose dual
+    # bound meets the index coupling (0): W1 = 0, exact; the later times take the paired
+    # bracket directly
+    assert c.method == "sparse+paired-bracket" and c.exact[0] and c.w1[0] == 0.0
     assert np.all(c.lower <= exact.w1 * (1 + 1e-12) + 1e-300)
     assert np.all(exact.w1 <= c.upper * (1 + 1e-12))
 

@@ -348,6 +348,23 @@ def test_a_solve_past_the_budget_is_stopped_and_its_bracket_certified(monkeypatc
     assert r.lower / exact > (0.05 if paired else 0.3)  # projections: weak in R^4, not void
 
 
+def test_a_stopped_solve_on_paired_atoms_is_exact_when_the_dual_proves_the_pairing(
+        monkeypatch):
+    """Paired atoms whose index coupling is optimal (a translation smaller than the atoms'
+    spacing): when the first solve is stopped, the fallback's dual bound still proves the
+    value, ``exact=True`` with the stopped solve named in the note."""
+    import time
+
+    x, _ = _paired(2000)
+    y = x + np.array([1e-4, 0.0, 0.0, 0.0])
+    monkeypatch.setattr(sparse_mod, "FORK_EDGES", 0)
+    monkeypatch.setattr(sparse_mod, "_solve", lambda *args: time.sleep(600))
+    r = w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=2.0)
+    assert r.exact and r.info["first_solve_stopped"]
+    assert r.value == pytest.approx(1e-4, rel=1e-12)
+    assert "exact all the same" in r.note and "ran out during network-simplex solve 1" in r.note
+
+
 def test_a_failing_child_raises_a_named_error(monkeypatch):
     from kinred.errors import NotConverged
 

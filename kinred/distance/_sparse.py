@@ -285,23 +285,27 @@ def _cheap_lower(X, a, Y, b, rng) -> float:
 
 
 def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds):
-    """The certified bracket when the budget ran out during solve ``it``: the bounds of the
-    earlier solves, or (first solve) those of :func:`kinred.distance.paired_w1_bracket`
-    (paired atoms: index coupling, 1-D projections; ``O(N log N)``) or of the general bracket
-    (explicit couplings, projections, a sub-sampled dual)."""
+    """``(lower, upper, reason, exact)`` when the budget ran out during solve ``it``: the
+    bounds of the earlier solves, or (first solve) those of
+    :func:`kinred.distance.paired_w1_bracket` (paired atoms: index coupling, 1-D projections
+    and the dual bound searched within another ``max_seconds``, which may prove the index
+    coupling optimal) or of the general bracket (explicit couplings, projections, a
+    sub-sampled dual)."""
     head = (f"the time budget max_seconds = {max_seconds:g} ran out during network-simplex "
             f"solve {it} (stopped; ")
     if it > 1:
-        return lower, upper, head + "the bounds of the earlier solves)"
+        return lower, upper, head + "the bounds of the earlier solves)", False
     if paired:
         from ._paired import paired_w1_bracket
 
-        r = paired_w1_bracket(X, Y, a, seed=int(rng.integers(2**32)))
-        return r.lower, r.upper, head + "the paired bracket: index coupling, 1-D projections)"
+        r = paired_w1_bracket(X, Y, a, seed=int(rng.integers(2**32)), dual_seconds=max_seconds)
+        how = ("proved optimal by the dual bound" if r.exact else
+               "index coupling, 1-D projections, the dual bound")
+        return r.lower, r.upper, head + f"the paired bracket: {how})", r.exact
     from ._bracket import bracket_atoms
 
     lo, up, note = bracket_atoms(Pts(X, a), Pts(Y, b), rng)
-    return lo, up, head + note + ")"
+    return lo, up, head + note + ")", False
 
 
 def price(n: int, m: int, d: int, k: int, edges: int, max_bytes=None) -> None:
@@ -386,8 +390,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                                                          budget.deadline)
         except _SolveTimedOut:
             tm["solve"] += time.perf_counter() - s
-            lower, upper, reason = _timed_out(X, a, Y, b, paired, rng, lower, upper, it,
-                                              max_seconds)
+            lower, upper, reason, exact = _timed_out(X, a, Y, b, paired, rng, lower, upper,
+                                                     it, max_seconds)
             stopped_first = it == 1
             break
         tm["solve"] += time.perf_counter() - s
@@ -490,6 +494,9 @@ def describe(o: SparseOutcome, k: int, unit: float) -> str:
             f"neighbours from each side + one coupling; {o.edges} edges after {o.iterations} "
             f"solve(s) of "
             f"column generation, {o.seconds:.2f} s)")
+    if o.exact and o.first_solve_stopped:
+        return (head + f"; exact all the same: {o.reason}; the index coupling's cost meets "
+                       "the dual lower bound to round-off")
     if o.exact:
         return (head + "; optimal over all pairs: the c-transform lower bound meets the plan's "
                        "cost to round-off")

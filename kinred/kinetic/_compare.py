@@ -111,6 +111,8 @@ def _w1_atoms(A, B, wa, wb, *, max_seconds=MAX_W1_SECONDS, seed=0):
     except TooLarge as exc:
         r = getattr(exc, "result", None)
     if paired:
+        if r is not None and (r.info or {}).get("first_solve_stopped"):
+            return r        # its bracket is already the paired one, with the dual bound
         q = _paired_bracket(A, B, wa, seed, max_seconds)
         return q if r is None or q.exact else _tighter(r, q)
     return r if r is not None else w1(A, B, method="bracket", a=wa, b=wb, seed=seed)
