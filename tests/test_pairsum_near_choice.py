@@ -106,6 +106,7 @@ def test_auto_refuses_the_ring_of_radius_20_at_a_million_within_seconds():
     # no near field was summed: a grid is built at most when the estimate comes within
     # CLEAR_LOSS of the limit (then measured and refused)
     assert all(g.builds <= 1 for g in plan.candidates["nufft"][1].groups)
+    assert all(i["near_pairs"] == 0 for i in plan.candidates["nufft"][1].info())
 
 
 def test_auto_builds_no_grid_for_a_candidate_that_cannot_win():

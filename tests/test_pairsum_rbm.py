@@ -253,6 +253,17 @@ def test_simulate_reuses_the_sums_arrays_and_keeps_the_trajectory():
     assert a is b and f.n_evals == 2
     assert np.array_equal(b, f(0.0, x0, v0, np.random.default_rng(1))[1])
     assert f(0.0, x0, v0, np.random.default_rng(1))[1] is not b
+
+    class Watched(VectorField):             # a subclass that watches its calls
+        calls = 0
+
+        def __call__(self, t, x, v, rng=None):
+            Watched.calls += 1
+            return super().__call__(t, x, v, rng)
+
+    g = Watched(sc)
+    c = g.transient(0.0, x0, v0, np.random.default_rng(1))[1]
+    assert Watched.calls == 1 and np.array_equal(c, b) and c is not b
     tr = simulate(sc, x0, v0, (0.0, steps * h), h, method="euler", seed=3)
     x, v, gen = x0.copy(), v0.copy(), as_generator(3)        # simulate's generator of seed 3
     for _ in range(steps):
@@ -295,6 +306,8 @@ def test_bad_input():
                 [[0.0] * 2] * 5):
         with pytest.raises(InvalidInput, match=r"out\['v'\] must be a writeable C-contiguous"):
             rb.evaluate(plan, x, v, g, out={"v": bad})
+    with pytest.raises(InvalidInput, match=r"out\['v'\] shares memory with the state's v"):
+        rb.evaluate(plan, x, v, g, out={"v": v})
 
 
 def test_alias_and_repr():

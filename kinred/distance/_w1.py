@@ -179,7 +179,9 @@ def w1(
           cost (an upper bound) and the lower bound meet to round-off: then ``exact=True``
           and the value is proved optimal. If a budget (``max_iter``, ``max_edges``,
           ``max_seconds``) runs out first: the certified bracket, ``exact=False``, the reason
-          in ``note``. Memory ``O(neighbors·(N + M))``, priced first (``max_bytes``); the
+          in ``note`` (a first solve stopped on corresponding atoms falls back on
+          :func:`paired_w1_bracket` with its dual bound, within another ``max_seconds``, which
+          can still prove the index coupling optimal: then ``exact=True``). Memory ``O(neighbors·(N + M))``, priced first (``max_bytes``); the
           method of choice beyond a few thousand atoms (docs/w1.md).
         * ``"exact-1d"`` -- d = 1: sorted merge for atoms, :math:`\int|F - G|` by quadrature for
           continuous laws (exact to ~1e-13).

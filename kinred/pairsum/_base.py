@@ -271,7 +271,7 @@ class PairSum(Protocol):
     ``(n, dim)`` arrays it overwrites and returns instead of fresh ones, with the same values)
     declares ``accepts_out = True``; :meth:`kinred.integrate.VectorField.transient` then
     reuses two arrays for the whole run of a one-stage method (:class:`RandomBatch` at large
-    ``N·d``, where fresh pages cost a fifth of an evaluation).
+    ``N·d``, where fresh pages cost about 10 % of an evaluation).
 
     A backend that draws random numbers declares the attribute ``stochastic = True``:
     :func:`~kinred.integrate.simulate` then passes the run's generator (from its ``seed``) to

@@ -13,10 +13,10 @@ Representation. On ``m`` equal intervals ``[ih, (i + 1)h)`` of ``[0, R]`` the fu
 interval (``g(s) ≈ Σₖ C[i, k] wᵏ``, ``w = s/h − i ∈ [0, 1)``), where ``g = φ`` for a kernel
 bounded at 0, and ``g(s) = s·φ(s)`` (then ``φ = g/s``) for a kernel with a ``1/s`` cusp
 (Morse with ``soft = 0``: ``s·φ(s)`` is smooth, so the *relative* error stays small near 0).
-``s = 0`` exactly takes ``φ(0)`` as the kernel defines it.
+``s = 0`` exactly takes ``φ(0)`` as the kernel defines it (0 where it is not finite).
 
 Accuracy, measured not assumed. ``m`` doubles from :data:`M_MIN` until the table is within
-``atol + rtol·|φ(s)|`` of the kernel at eight points of every interval (the Chebyshev
+``atol + rtol·|φ(s)|`` of the kernel at seven points of every interval (the Chebyshev
 interpolant's error peaks between its nodes, and the test points sit between them), with
 ``atol = rtol·κ`` from the caller (:data:`TABLE_FACTOR` × the tolerance the backend sets for
 its kernel values); no table (direct evaluation) when :data:`M_MAX` intervals do not reach
@@ -41,17 +41,20 @@ M_MAX = 2 ** 17
 # Chebyshev points of [0, 1] and the inverse Vandermonde matrix of the cubic through them.
 _NODES = 0.5 * (1.0 - np.cos(np.pi * (np.arange(4) + 0.5) / 4.0))
 _INV = np.linalg.inv(np.vander(_NODES, 4, increasing=True))
-# the test points: midway between consecutive nodes and the interval's ends
-_TESTS = np.sort(np.r_[0.0, 0.5 * (_NODES[:-1] + _NODES[1:]), 1.0 - 1e-12,
-                       0.5 * _NODES[0], 0.5 * (1.0 + _NODES[-1]), 0.5])
+# the test points of an interval (seven, distinct): its start, midway between the ends and
+# the outer nodes and between consecutive nodes, and just before its end (1 − 2⁻¹⁰: a
+# distinct double in the interval for every m ≤ M_MAX)
+_TESTS = np.sort(np.r_[0.0, 0.5 * _NODES[0], 0.5 * (_NODES[:-1] + _NODES[1:]),
+                       0.5 * (1.0 + _NODES[-1]), 1.0 - 2.0 ** -10])
 
 
 @dataclass(frozen=True, eq=False)
 class Table:
-    """A tabulated kernel on ``[0, R]``: ``C`` of shape ``(m + 1, 4)`` (the last row repeats
-    the one before: ``s`` rounding up to ``R``), ``inv_h = m/R``, ``singular`` (``C``
-    tabulates ``s·φ``), ``at_zero = φ(0)``, the measured ``error`` relative to the budget
-    (≤ 1), and ``m``."""
+    """A tabulated kernel on ``[0, R]``: ``C`` of shape ``(m, 4)``, ``inv_h = m/R`` (an ``s``
+    whose ``s·inv_h`` rounds to ``m`` or beyond stays on the last cubic, ``w`` slightly above
+    1), ``singular`` (``C`` tabulates ``s·φ``), ``at_zero = φ(0)`` (0 where the kernel is not
+    finite at 0, Morse's convention for its cusp), the measured ``error`` relative to the
+    budget (≤ 1), and ``m``."""
 
     C: np.ndarray
     inv_h: float
@@ -69,10 +72,7 @@ class Table:
 def _coefficients(g, R: float, m: int) -> np.ndarray:
     h = R / m
     s = (np.arange(m)[:, None] + _NODES[None, :]) * h
-    C = np.empty((m + 1, 4))
-    C[:m] = g(s.ravel()).reshape(m, 4) @ _INV.T
-    C[m] = C[m - 1]
-    return C
+    return g(s.ravel()).reshape(m, 4) @ _INV.T
 
 
 def evaluate(table: Table, s: np.ndarray) -> np.ndarray:
@@ -103,7 +103,6 @@ def tabulate(phi, R: float, rtol: float, kappa: float) -> Table | None:
         near0, near1 = np.abs(np.asarray(phi(np.array([1e-6 * R, 1e-3 * R])), dtype=float))
     # a 1/s cusp grows by 1000 between the two: try s·φ first
     order = (True, False) if near0 > 100.0 * near1 else (False, True)
-    best = None
     for singular in order:
         def g(s, singular=singular):
             with np.errstate(all="ignore"):
@@ -124,11 +123,6 @@ def tabulate(phi, R: float, rtol: float, kappa: float) -> Table | None:
             if not np.isfinite(err):
                 break
             if err <= 1.0:
-                tab = Table(C, m / R, singular, at_zero, err, m)
-                if best is None or tab.m < best.m:
-                    best = tab
-                break
+                return Table(C, m / R, singular, at_zero, err, m)
             m *= 2
-        if best is not None:
-            break
-    return best
+    return None

@@ -269,6 +269,8 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
         if R == 0.0:
             continue
         frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)
-        fused = sub.compiled          # every kernel through its table (cells._values)
+        # every kernel through its table (cells._values); a kernel no table reaches (rare:
+        # a kink or spike finer than 2¹⁷ intervals) runs slower than this estimate
+        fused = sub.compiled
         total += _cost.cell_seconds(frac * n * (n - 1) / 2.0, k, len(src.terms), fused)
     return total / nt

@@ -2,13 +2,16 @@ r"""The cell-list pair-sum backend: short-range kernels truncated from ``tol``, 
 
 For distances in ``k ≤ 3`` dimensions and kernels whose range is short against the cloud
 (Morse's exponential tails), every pair term ``Σⱼ cⱼ φ(|sᵢ − sⱼ|)(zⱼ − zᵢ)`` (the paper's
-class (1.1) with ``f_ij = c_j φ``; the Morse kernel of eq. (3.14)) is summed exactly over the
+class (1.1) with ``f_ij = c_j φ``; the Morse kernel of eq. (3.14)) is summed over the
 pairs closer than a cutoff ``R`` found by a cell list (:mod:`kinred.pairsum._cells`), with
 the carrier centred as in the other backends. ``R`` is the smallest distance with
 ``B(R) ≤ TRUNC_FACTOR · tol · κ`` for the kernel's declared tail bound ``B``
 (:func:`~kinred.pairsum.tail_bound`) and ``κ`` the mean of ``|φ|`` over the cloud's pairs
 (the scale of a row sum per unit weight, as in :class:`~kinred.pairsum.NUFFT`): each pair
-left out changes a row sum by at most ``B(R)``, a relative ``TRUNC_FACTOR·tol`` of it.
+left out changes a row sum by at most ``B(R)``, a relative ``TRUNC_FACTOR·tol`` of it. The
+compiled pass evaluates each kernel from its table on ``[0, R]`` (:mod:`kinred.pairsum._table`:
+within ``0.01·tol·(κ + |φ|)`` per pair, measured when built); a fixed ``cutoff=`` sums the
+kernel itself.
 """
 
 from __future__ import annotations
@@ -126,7 +129,9 @@ class CellList:
         A fixed cutoff instead (then the error is the user's): also for kernels whose tail is
         unknown.
     compiled : bool
-        The numba kernels (default) or their numpy twins (tests).
+        The compiled pass with every kernel through its table (default; within
+        ``0.01·tol·(κ + |φ|)`` of the kernel, ``kinred/pairsum/_table.py``) or the numpy twin
+        on the kernel itself (tests).
 
     Examples
     --------
@@ -228,18 +233,17 @@ class CellList:
 
 def _values(plan: CellListPlan, src: _Source, s: np.ndarray, R: float) -> tuple:
     """Per term of the source, ``q ↦ φ(√q)`` (:func:`kernel_values`) with, for the compiled
-    pass, its table on ``[0, R]`` (:mod:`kinred.pairsum._table`, within
-    ``TABLE_FACTOR·tol·(κ + |φ|)``: the truncation's own target is ``TRUNC_FACTOR·tol·κ``),
-    kept while the cutoff is."""
+    pass and a cutoff derived from ``tol``, its table on ``[0, R]``
+    (:mod:`kinred.pairsum._table`, within ``TABLE_FACTOR·tol·(κ + |φ|)`` with the ``κ`` the
+    cutoff was derived with: the truncation's own target is ``TRUNC_FACTOR·tol·κ``), kept
+    while the cutoff is. A fixed ``cutoff=`` sums the kernel itself (exact within it)."""
     if src.values is not None and src.values[0] == R:
         return src.values[1]
-    if src.kappas is None:
-        ext = s.max(axis=0) - s.min(axis=0)
-        src.kappas = tuple(cell_scales(t.kernel, s, ext)[1] for t in src.terms)
+    tables = plan.compiled and plan.cutoff is None and src.kappas is not None
     fns = []
-    for t, kappa in zip(src.terms, src.kappas):
+    for t, kappa in zip(src.terms, src.kappas if tables else [0.0] * len(src.terms)):
         fn = kernel_values(t.kernel)
-        if plan.compiled and kappa > 0.0:
+        if tables and kappa > 0.0:
             fn.table = _table.tabulate(lambda r, fn=fn: fn(np.asarray(r, dtype=float) ** 2),
                                        R, _table.TABLE_FACTOR * plan.tol, kappa)
         fns.append(fn)

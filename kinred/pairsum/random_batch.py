@@ -233,6 +233,8 @@ class RandomBatch:
         state = {"x": np.ascontiguousarray(x, dtype=np.float64),
                  "v": None if v is None else np.ascontiguousarray(v, dtype=np.float64)}
         outs = {tgt: _result_array(plan, out, tgt) for tgt in plan.targets}
+        if out is not None:
+            _check_distinct(outs, state)
         _parallel.run_parallel(partial(_share, plan, state, perm, outs), list(plan.groups))
         return outs
 
@@ -249,6 +251,19 @@ def _result_array(plan: RandomBatchPlan, out: dict | None, tgt: str) -> np.ndarr
                            f"shape {(plan.n, plan.dim)}, got {type(a).__name__} "
                            f"{getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}")
     return a
+
+
+def _check_distinct(outs: dict, state: dict) -> None:
+    """The result arrays may share no memory with each other nor with the state (the kernel
+    clears rows of a result while it still reads the carriers)."""
+    arrays = list(outs.items()) + [(f"the state's {k}", a) for k, a in state.items()
+                                   if a is not None]
+    for i, (name, a) in enumerate(arrays[:len(outs)]):
+        for other, b in arrays[i + 1:]:
+            if np.may_share_memory(a, b):
+                raise InvalidInput(f"out[{name!r}] shares memory with "
+                                   f"{other if other.startswith('the') else f'out[{other!r}]'}"
+                                   "; give each target its own array, apart from x and v")
 
 
 def _split(items: tuple, k: int) -> list:
