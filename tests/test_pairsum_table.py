@@ -129,3 +129,15 @@ def test_compiled_lookup_equals_its_numpy_twin():
                               q.size)
         twin = _table.evaluate(tab, np.sqrt(q))
         np.testing.assert_allclose(bf, twin, rtol=1e-13, atol=1e-13 * np.abs(twin).max())
+
+
+def test_distances_at_the_tables_end_stay_on_its_last_cubic():
+    """A pair just inside the cutoff can have ``s·m/R`` round to ``m``: it stays on the last
+    interval's cubic (a repeated last row would evaluate the cubic one interval too early:
+    1.4e-3 off for ``exp(−s/2)`` on ``[0, 1.7]``, 10⁵ times the budget)."""
+    phi = lambda s: np.exp(-np.asarray(s, dtype=float) / 2)      # noqa: E731
+    for R in np.random.default_rng(4).uniform(0.5, 3.0, 200):
+        tab = _table.tabulate(phi, R, 1e-8, 1.0)
+        s = np.array([np.nextafter(R, 0.0), R])
+        err = np.abs(_table.evaluate(tab, s) - phi(s))
+        assert np.all(err <= 1e-8 * (1.0 + phi(s))), R
