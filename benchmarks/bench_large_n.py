@@ -242,6 +242,20 @@ def loop_overhead(n, d, p, steps, repeat):
           f"hand-written Euler steps")
     print(f"    against the unvalidated right-hand side simulate calls ({1e3 * t_int:.1f} ms): "
           f"overhead {100 * (per_step - t_int) / t_int:.0f} %")
+    # the VM's speed drifts between the blocks above: pair each run with the right-hand
+    # sides measured next to it, and take the median of the pairs' overheads
+    ratios = []
+    for _ in range(max(3, repeat)):
+        t = time.perf_counter()
+        for _ in range(steps):
+            scene._rhs(x0, v0, 0.0, rng=gen)
+        t_rhs_pair = (time.perf_counter() - t) / steps
+        t = time.perf_counter()
+        run()
+        ratios.append((time.perf_counter() - t) / steps / t_rhs_pair - 1.0)
+    print(f"    interleaved, {len(ratios)} pairs of a run and {steps} unvalidated right-hand "
+          f"sides: overhead median {100 * float(np.median(ratios)):.0f} % (range "
+          f"{100 * min(ratios):.0f}–{100 * max(ratios):.0f} %)")
 
 
 def section_overhead(args):
