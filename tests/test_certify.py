@@ -204,9 +204,9 @@ def test_certificate_adds_one_pair_pass_and_two_projections_per_step(monkeypatch
     calls = {"rhs": [], "pass": 0, "apply": 0}
     rhs, pp, apply = Scene._rhs, _observer.pair_pass, P.apply
 
-    def count_rhs(self, x, v, t, rng=None):
+    def count_rhs(self, x, v, t, rng=None, out=None):
         calls["rhs"].append(x.shape[1])
-        return rhs(self, x, v, t, rng)
+        return rhs(self, x, v, t, rng, out)
 
     def count_pass(*a, **kw):
         calls["pass"] += 1

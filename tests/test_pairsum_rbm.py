@@ -233,9 +233,12 @@ def test_out_arrays_are_overwritten_with_the_fresh_values_bitwise(n, p, block):
         fresh = rb.evaluate(plan, x, vv, np.random.default_rng(5))
         out = {t: np.full((n, 3), np.nan) for t in fresh}
         got = rb.evaluate(plan, x, vv, np.random.default_rng(5), out=out)
+        twin = _twin(sc, plan, x, vv, np.random.default_rng(5).permutation(n))
         for t in fresh:
             assert got[t] is out[t]
             assert np.array_equal(got[t], fresh[t])
+            scale = np.max(np.abs(twin[t]))
+            assert np.max(np.abs(got[t] - twin[t])) <= 1e-12 * scale
 
 
 def test_simulate_reuses_the_sums_arrays_and_keeps_the_trajectory():

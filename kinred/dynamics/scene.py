@@ -276,11 +276,7 @@ class Scene:
         if self.order == 2:
             if dv is None:
                 dv = np.zeros_like(v)
-            if dxe is None:
-                dx = v
-            else:               # v + dxe, in the array this call owns
-                dx = dxe
-                dx += v
+            dx = v if dxe is None else v + dxe
         else:
             dv = None
             dx = np.zeros_like(x) if dxe is None else dxe

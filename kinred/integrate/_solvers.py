@@ -104,21 +104,16 @@ class VectorField:
             return self(t, x, v, rng)       # a subclass's own evaluation (fresh arrays)
         out = None
         if getattr(self.scene.pairsum, "accepts_out", False) is True:
-            n, dim = x.shape
-            if self._out is None or self._out[0] != (n, dim):
-                self._out = ((n, dim), {})
+            if self._out is None or self._out[0] != x.shape:      # once per run and shape
+                self._out = (x.shape, {term.target: np.empty(x.shape)
+                                       for term in self.scene.pair_terms.terms})
             out = self._out[1]
-            for tgt in {term.target for term in self.scene.pair_terms.terms}:
-                if tgt not in out:
-                    out[tgt] = np.empty((n, dim))
         return self._evaluate(t, x, v, rng, out)
 
     def _evaluate(self, t, x, v, rng, out):
         """The one evaluation both calls go through (the hook for subclasses that watch
         every evaluation, as the certificate's field does)."""
         self.n_evals += 1
-        if out is None:
-            return self.scene._rhs(x, v, t, rng)
         return self.scene._rhs(x, v, t, rng, out=out)
 
     def noise(self, rng, n: int, dim: int, h: float):

@@ -25,7 +25,7 @@ it, or when the kernel is not finite on ``(0, R]``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -123,6 +123,6 @@ def tabulate(phi, R: float, rtol: float, kappa: float) -> Table | None:
             if not np.isfinite(err):
                 break
             if err <= 1.0:
-                return Table(C, m / R, singular, at_zero, err, m)
+                return replace(tab, error=err)
             m *= 2
     return None

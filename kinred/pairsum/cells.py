@@ -239,16 +239,14 @@ def _values(plan: CellListPlan, src: _Source, s: np.ndarray, R: float) -> tuple:
     while the cutoff is. A fixed ``cutoff=`` sums the kernel itself (exact within it)."""
     if src.values is not None and src.values[0] == R:
         return src.values[1]
-    tables = plan.compiled and plan.cutoff is None and src.kappas is not None
-    fns = []
-    for t, kappa in zip(src.terms, src.kappas if tables else [0.0] * len(src.terms)):
-        fn = kernel_values(t.kernel)
-        if tables and kappa > 0.0:
-            fn.table = _table.tabulate(lambda r, fn=fn: fn(np.asarray(r, dtype=float) ** 2),
-                                       R, _table.TABLE_FACTOR * plan.tol, kappa)
-        fns.append(fn)
-    src.values = (R, tuple(fns))
-    return src.values[1]
+    fns = tuple(kernel_values(t.kernel) for t in src.terms)
+    if plan.compiled and plan.cutoff is None and src.kappas is not None:
+        for fn, kappa in zip(fns, src.kappas):
+            if kappa > 0.0:
+                fn.table = _table.tabulate(lambda r, fn=fn: fn(np.asarray(r, dtype=float) ** 2),
+                                           R, _table.TABLE_FACTOR * plan.tol, kappa)
+    src.values = (R, fns)
+    return fns
 
 
 def kernel_values(kernel):
