@@ -183,28 +183,35 @@ def test_fused_run_is_the_unfused_run(order, monkeypatch):
     assert not np.array_equal(a.x[0], a.x[-1])
 
 
-def test_a_step_is_one_pass_over_the_state(monkeypatch):
+@pytest.mark.parametrize("backend", ["random_batch", "dense"])
+def test_a_step_is_one_pass_over_the_state(backend, monkeypatch):
     """One fused call per step and no sweep of its own: the run's only sweeps are those of the
     initial centroid (two: x0 is far from 0), which give Λ(x0) too, and Γ(v0) comes with the
     copy of v0 (today's main: 2 sweeps per step and 3 at t0, 23 for 10 steps, beside the
-    Euler update and a sum of x per step)."""
+    Euler update and a sum of x per step). With RandomBatch the backend's fused step
+    (RandomBatch.euler_step) takes the update and the sums too: no Euler sweep at all."""
+    from kinred.pairsum import Dense, RandomBatch
     calls = []
 
-    def spy(name):
-        real = getattr(_kernels, name)
-        monkeypatch.setattr(_kernels, name, lambda *a: calls.append(name) or real(*a))
+    def spy(name, owner=_kernels):
+        real = getattr(owner, name)
+        monkeypatch.setattr(owner, name, lambda *a: calls.append(name) or real(*a))
     sc, x0, v0 = _large()
+    if backend == "dense":
+        sc = Scene(sc.effects, "mean", pairsum=Dense())
     simulate(sc, x0, v0, (0.0, 1e-3), 1e-3, seed=1)       # numba loads its registries first
     for name in ("sweep", "euler_pair", "euler_one", "euler_sweep", "euler_sweep_v",
                  "euler_sweep_one", "copy_sweep"):
         spy(name)
+    spy("euler_step", RandomBatch)
     sums = []
     real_sum = np.sum
     monkeypatch.setattr(np, "sum", lambda a, *k, **kw: sums.append(np.shape(a)) or
                         real_sum(a, *k, **kw))
     tr = simulate(sc, x0, v0, (0.0, 10e-3), 1e-3, seed=1)
     assert tr.n_steps == 10
-    assert sorted(calls) == ["copy_sweep"] + ["euler_sweep_v"] * 10 + ["sweep"] * 2
+    step = "euler_step" if backend == "random_batch" else "euler_sweep_v"
+    assert sorted(calls) == ["copy_sweep"] + [step] * 10 + ["sweep"] * 2
     assert x0.shape not in sums                 # no separate sum of a state array
 
 

@@ -60,20 +60,19 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numpy as np
 from numba import njit
 
+from .._rowsum_kernels import BLOCK
+from .._rowsum_kernels import flush as _flush, moment as _moment, row as _row
 from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "shifted_copy", "frame", "add_shift", "copy_sweep",
+           "euler_moments_numpy", "step_moments", "shifted_copy", "frame", "add_shift", "copy_sweep",
            "copy_moments", "state_moments",
            "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
 #: reductions); NaN and Inf still propagate.
 _FM = {"reassoc", "contract"}
-
-#: Rows per partial sum of :func:`moments`.
-BLOCK = 256
 
 #: From this many entries ``N·d`` on, :func:`moments` and :func:`euler` split the rows in two
 #: halves, the second one in a worker thread when the engine has two threads or more
@@ -143,34 +142,6 @@ def sweep(z, w, shift, c, r, acc):  # pragma: no cover - compiled
 #: fastmath of the fused kernels: re-association of their sums only. No contraction: the
 #: update ``x + dx·h`` must stay a rounded product and a rounded sum (numpy's, bit for bit).
 _FM_FUSED = {"reassoc"}
-
-
-@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
-def _flush(k, blk, part, r, acc):  # pragma: no cover - compiled
-    """Add the block's partial sums ``blk[k], part[k]`` to ``r[k], acc[k]`` and clear them."""
-    for j in range(blk.shape[1]):
-        r[k, j] += blk[k, j]
-        blk[k, j] = 0.0
-    for m in range(4):
-        acc[k, m] += part[k, m]
-        part[k, m] = 0.0
-
-
-@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy", inline="always")
-def _moment(a, e, wi, blk, k, j):  # pragma: no cover - compiled
-    """One element of the fused sweeps: ``blk[k, j] += wᵢ·e``; returns the element's ``e²``,
-    ``a²`` and ``a`` for the row's sums."""
-    blk[k, j] += wi * e
-    return e * e, a * a, a
-
-
-@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy", inline="always")
-def _row(part, k, wi, q, p, t):  # pragma: no cover - compiled
-    """A finished row of the fused sweeps into the block's partial sums ``part[k]``."""
-    part[k, 0] += wi * q
-    part[k, 1] += wi * p
-    part[k, 2] += t
-    part[k, 3] += wi
 
 
 @njit(cache=True, nogil=True, fastmath=_FM_FUSED, boundscheck=False, error_model="numpy")
@@ -422,13 +393,9 @@ def euler_moments(x, dx, v, dv, h, w, shift, centres) -> tuple:
     round-off (1e-12 relative). Twin: :func:`euler_moments_numpy`.
     """
     n, d = x.shape
-    k = 1 if v is None else 2
-    sh = np.zeros((k, d))
-    if shift is not None:
-        sh[0] = shift
-    with np.errstate(all="ignore"):             # NaN and Inf propagate to the caller's test
-        c = np.array(centres[:k], dtype=float)
-        c[~np.isfinite(c)] = 0.0
+
+    def sums(sh, c):
+        k = sh.shape[0]
 
         def part(i0, i1):
             r, acc = np.empty((k, d)), np.empty((k, 4))
@@ -444,6 +411,29 @@ def euler_moments(x, dx, v, dv, h, w, shift, centres) -> tuple:
         r, acc = parts[0]
         for rp, ap in parts[1:]:
             r, acc = r + rp, acc + ap
+        return r, acc
+    return step_moments(x, v, w, shift, centres, sums)
+
+
+def step_moments(x, v, w, shift, centres, sums):
+    """The moments ``(F, S, T)`` of the new ``x + shift`` and ``v`` of a step whose pass over
+    the state also gives their sums: ``sums(sh, c)`` updates the state and returns ``(r, acc)``
+    of :func:`kinred._rowsum_kernels.row_sums` (``(k, d)``, ``(k, 4)``; ``k = 1`` without ``v``)
+    about the centres ``c (k, d)`` of the rows ``z + sh[k]``, or None when it cannot take the
+    step (then this returns None and ``centres`` are unchanged). ``centres`` as in
+    :func:`euler_moments`."""
+    d = x.shape[1]
+    k = 1 if v is None else 2
+    sh = np.zeros((k, d))
+    if shift is not None:
+        sh[0] = shift
+    with np.errstate(all="ignore"):             # NaN and Inf propagate to the caller's test
+        c = np.array(centres[:k], dtype=float)
+        c[~np.isfinite(c)] = 0.0
+        got = sums(sh, c)
+        if got is None:
+            return None
+        r, acc = got
         out = []
         for a, z in enumerate((x, v)[:k]):
             centres[a][:] = c[a]
@@ -463,24 +453,33 @@ def frame(z, w) -> tuple:
     """``(z − c, c, (F, S, T))``: a fresh copy of ``z (N, d)`` relative to its weighted
     centroid ``c``, the reference centre that :func:`moments` leaves from 0 (compensated when
     the centroid is far from 0, as :func:`kinred.observables.centre`; one or two sweeps, no
-    ``(N, d)`` temporary), the copy written by :func:`shifted_copy` (one pass), and the
+    ``(N, d)`` temporary), the copy written by :func:`shifted_copy` (one pass over the row
+    ranges of :func:`_halves`), and the
     moments of ``z`` that came with ``c``."""
     n, d = z.shape
     c, m = np.zeros(d), np.empty(3)
     moments(z, w, np.zeros(d), c, m)
     out = np.empty((n, d))
-    shifted_copy(z, c, out)
+    _each(lambda i0, i1: shifted_copy(z[i0:i1], c, out[i0:i1]), _halves(n, d))
     return out, c, (float(m[0]), float(m[1]), float(m[2]))
 
 
 def copy_moments(z, w) -> tuple:
     """``(copy of z, (F, S, T), c)``: a fresh copy of ``z (N, d)`` and its moments of
     :func:`moments` about the reference centre ``c`` (from 0, updated to the mean), from one
-    pass (:func:`copy_sweep`; a second sweep when the mean is far from 0)."""
+    pass (:func:`copy_sweep` over the row ranges of :func:`_halves`; a second sweep when the
+    mean is far from 0)."""
     n, d = z.shape
     out, c = np.empty((n, d)), np.zeros(d)
-    r, acc = np.empty(d), np.empty(4)
-    copy_sweep(z, w, c, r, acc, out)
+
+    def part(i0, i1):
+        r, acc = np.empty(d), np.empty(4)
+        copy_sweep(z[i0:i1], w[i0:i1], c, r, acc, out[i0:i1])
+        return r, acc
+    parts = _each(part, _halves(n, d))
+    r, acc = parts[0]
+    for rp, ap in parts[1:]:
+        r, acc = r + rp, acc + ap
     with np.errstate(all="ignore"):
         m = _finish(out, w, np.zeros(d), c, r, acc)
     return out, m, c

@@ -116,6 +116,18 @@ class VectorField:
         self.n_evals += 1
         return self.scene._rhs(x, v, t, rng, out=out)
 
+    def euler_step(self, t, x, v, h, rng, w, shift, centres):
+        """Forward Euler's step in place by the pair-sum backend's fused step
+        (``Scene._euler_fused``): the row sums ``(r, acc)`` of the new state, or None
+        (nothing done) when the backend has none or a subclass watches the evaluations."""
+        if (type(self).__call__ is not VectorField.__call__
+                or type(self)._evaluate is not VectorField._evaluate):
+            return None
+        got = self.scene._euler_fused(x, v, t, h, rng, w, shift, centres)
+        if got is not None:
+            self.n_evals += 1
+        return got
+
     def noise(self, rng, n: int, dim: int, h: float):
         """``(ΔX, ΔV)`` of all noise effects over a step ``h`` (None where absent)."""
         return self.scene.noise_increment(rng, n, dim, h)
@@ -206,6 +218,14 @@ class EulerMoments:
     def __call__(self, f, t, state, h, solver_state, rng):
         """``((x, v), (moments of x, moments of v or None))`` after one step ``t → t + h``."""
         x, v = state
+        step = getattr(f, "euler_step", None)
+        if step is not None and _f64_like(x, (x,) if v is None else (x, v)):
+            m = _kernels.step_moments(
+                x, v, self.w, self.mx.shift, [self.mx.ready(x)] +
+                ([] if v is None else [self.mv.ready(v)]),
+                lambda sh, c: step(t, x, v, h, rng, self.w, sh, c))
+            if m is not None:           # the backend's fused step: one pass over the state
+                return (x, v), m
         dx, dv = _transient(f, t, x, v, rng)
         if _f64_like(x, (x, dx) if v is None else (x, dx, v, dv)):
             centres = [self.mx.ready(x)] + ([] if v is None else [self.mv.ready(v)])

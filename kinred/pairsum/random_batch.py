@@ -30,6 +30,10 @@ evaluation is one step and this backend *is* RBM-1. Every evaluation draws a new
 so a multi-stage method (RK4, adaptive pairs) sees an independent, still unbiased, estimate in
 each stage: that is not the published scheme and gains no order (the error stays
 ``O(√(h/(p − 1)))``); adaptive error control then measures sampling noise. Use Euler.
+Euler's step can be taken inside the batches (:meth:`RandomBatch.euler_step`, which
+``simulate`` uses): each batch's rows are read and written by that batch alone, so the
+in-place update of a batch right after its sums is the step from the whole right-hand side,
+bit for bit, with one pass over the state and no derivative arrays.
 
 Error. For a fixed horizon the expected (mean-square) distance between the RBM trajectory
 and the exact one (both with step ``h``) is ``O(√(h/(p − 1)))`` (Jin–Li–Liu, §3, for
@@ -238,6 +242,133 @@ class RandomBatch:
         _parallel.run_parallel(partial(_share, plan, state, perm, outs), list(plan.groups))
         return outs
 
+    def euler_step(self, plan: RandomBatchPlan, x: np.ndarray, v: np.ndarray | None,
+                   h: float, rng, local: tuple, w: np.ndarray, shift: np.ndarray,
+                   centres: np.ndarray) -> tuple:
+        """Forward Euler's step (eq. (1.6)) with the pair sums of one partition, in place:
+        ``x ← x + h·dx``, ``v ← v + h·dv`` with ``(dx, dv)`` the drift that
+        :meth:`evaluate` (same ``rng`` draw) plus the scene's local drifts ``local =
+        (locₓ, loc_v)`` (arrays ``(n, dim)`` or None) give, bit for bit, and the row sums of
+        the new state for its moments, from one pass over the state (each batch's rows read,
+        summed, updated and summed again while in cache: no result arrays, no second pass).
+
+        ``w`` ``(n,)`` weights; ``shift``, ``centres`` ``(k, dim)`` (``k = 2`` with ``v``, else
+        1): the sums are those of ``kinred._rowsum_kernels.row_sums`` of ``x + shift[0]`` and
+        ``v + shift[1]`` about ``centres``. Returns ``(r, acc)`` of shapes ``(k, dim)``,
+        ``(k, 4)``, summed over fixed chunks in a fixed order (bit-identical for any thread
+        count).
+
+        Raises
+        ------
+        InvalidInput
+            A plan of another backend or shape, ``rng`` not a Generator, or state or local
+            arrays that are not C-contiguous float64 ``(n, dim)`` (the state writeable).
+        """
+        if not isinstance(plan, RandomBatchPlan) or x.shape != (plan.n, plan.dim):
+            raise InvalidInput(f"plan must be a RandomBatchPlan for states of shape (n, dim) = "
+                               f"{getattr(plan, 'n', '?'), getattr(plan, 'dim', '?')}; got "
+                               f"{type(plan).__name__} and x of shape {x.shape}")
+        if not isinstance(rng, np.random.Generator):
+            raise InvalidInput(f"RandomBatch needs the run's random generator, got rng={rng!r}")
+        shape = (plan.n, plan.dim)
+        for name, a, write in (("x", x, True), ("v", v, True), ("local x drift", local[0], False),
+                               ("local v drift", local[1], False)):
+            if a is not None and (type(a) is not np.ndarray or a.dtype != np.float64
+                                  or a.shape != shape or not a.flags.c_contiguous
+                                  or (write and not a.flags.writeable)):
+                raise InvalidInput(f"{name} must be a C-contiguous float64 array of shape "
+                                   f"{shape}{' (writeable)' if write else ''}, got "
+                                   f"{type(a).__name__} {getattr(a, 'dtype', '')} "
+                                   f"{getattr(a, 'shape', '')}")
+        k = 1 if v is None else 2
+        pieces = _pieces(plan, k)
+        npieces = len(pieces)
+        perm = rng.permutation(plan.n)
+        terms = [t for _, ts in plan.by_source for t, _ in ts]
+        code = {"x": 0, "v": 1}
+        step = _EulerStep(
+            x=x, v=x if v is None else v, order=k, h=float(h),
+            locx=x if local[0] is None else local[0], locv=x if local[1] is None else local[1],
+            flags=np.array([any(t.target == "x" for t in terms), local[0] is not None,
+                            any(t.target == "v" for t in terms), local[1] is not None]),
+            carriers=np.array([code[t.carrier] for t in terms], dtype=np.int64),
+            targets=np.array([code[t.target] for t in terms], dtype=np.int64),
+            w=np.ascontiguousarray(w, dtype=np.float64), shift=np.ascontiguousarray(shift[:k]),
+            c=np.ascontiguousarray(centres[:k]),
+            r=np.zeros((npieces, k, plan.dim)), acc=np.zeros((npieces, k, 4)))
+        state = {"x": x, "v": v}
+        nthreads = max(1, min(_parallel.get_num_threads(), npieces))
+        _parallel.run_parallel(partial(_share_step, plan, state, perm, step),
+                               _split(tuple(enumerate(pieces)), nthreads))
+        r, acc = step.r[0].copy(), step.acc[0].copy()
+        for i in range(1, len(step.r)):             # in the pieces' order, whatever the threads
+            r += step.r[i]
+            acc += step.acc[i]
+        return r, acc
+
+
+@dataclass(eq=False)
+class _EulerStep:
+    """The arguments of :func:`_rbm_kernels.batch_euler` common to all pieces
+    (:func:`_pieces`), and the pieces' row sums ``r[piece], acc[piece]``."""
+
+    x: np.ndarray
+    v: np.ndarray
+    order: int
+    h: float
+    locx: np.ndarray
+    locv: np.ndarray
+    flags: np.ndarray
+    carriers: np.ndarray
+    targets: np.ndarray
+    w: np.ndarray
+    shift: np.ndarray
+    c: np.ndarray
+    r: np.ndarray
+    acc: np.ndarray
+
+
+#: The fused Euler step walks a chunk in pieces whose state rows (``x`` and ``v``) take about
+#: this many bytes, so that the rows its distances and kernel values were computed from are
+#: still in cache when the pieces' sums and update read them again.
+PIECE_BYTES = 2 ** 21
+
+
+def _pieces(plan: RandomBatchPlan, k: int) -> list:
+    """``[(b0, b1), ...]``: the chunks' batches in consecutive pieces of about
+    :data:`PIECE_BYTES` of state rows, in the order of the chunks (fixed by the plan: the
+    sums do not depend on the threads, among which the pieces are dealt in equal runs)."""
+    per = max(1, PIECE_BYTES // (plan.p * plan.dim * 8 * k))
+    return [(s0, min(s0 + per, b1)) for b0, b1 in plan.chunks for s0 in range(b0, b1, per)]
+
+
+def _share_step(plan: RandomBatchPlan, state: dict, perm: np.ndarray, step: _EulerStep,
+                g: int, pieces) -> None:
+    """Thread ``g``'s pieces ``(index, (b0, b1))`` of :meth:`RandomBatch.euler_step`: per
+    piece the squared distances and every term's kernel values (as :func:`_share`), then the
+    piece's fused sums, update and row sums."""
+    nterms = len(step.carriers)
+    mmax = max(_rbm_kernels.pairs_in(plan.n, plan.p, b0, b1) for _, (b0, b1) in pieces)
+    qbuf = np.empty(max(mmax, 1))
+    phis = np.empty((nterms, max(mmax, 1)))
+    n, p = plan.n, plan.p
+    for i, (b0, b1) in pieces:
+        m = _rbm_kernels.pairs_in(n, p, b0, b1)
+        t = 0
+        if m:
+            for s, terms in plan.by_source:
+                q = qbuf[:m]
+                _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
+                for term, value_sq in terms:
+                    if value_sq is not None:
+                        value_sq(q.reshape(1, m), phis[t, :m].reshape(1, m))
+                    else:
+                        phis[t, :m] = term.kernel(np.sqrt(q))
+                    t += 1
+        _rbm_kernels.batch_euler(step.x, step.v, step.order, plan.cs, perm, p, b0, b1,
+                                 phis[:, :max(m, 1)], step.carriers, step.targets, step.h,
+                                 step.locx, step.locv, step.flags, step.w, step.shift, step.c,
+                                 step.r[i], step.acc[i])
 
 def _result_array(plan: RandomBatchPlan, out: dict | None, tgt: str) -> np.ndarray:
     """The array the sums of ``tgt`` are written to: ``out[tgt]`` when given (checked), else
