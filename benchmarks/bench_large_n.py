@@ -26,7 +26,7 @@ measured in one process run.
 * ``overhead`` – ``simulate``'s own cost at N = 10⁵, d = 200, ``RandomBatch(p = 4)``, 10 Euler
   steps with the default save (``--quick``: N = 10⁴): one right-hand side, a hand-written
   Euler step, ``simulate``'s time per step and its overhead (target ≤ 15 % of the
-  right-hand sides).
+  right-hand sides), split into the steps' own cost and the run's fixed cost.
 
 Run from the repository root::
 
@@ -244,7 +244,9 @@ def loop_overhead(n, d, p, steps, repeat):
           f"overhead {100 * (per_step - t_int) / t_int:.0f} %")
     # the VM's speed drifts between the blocks above: pair each run with the right-hand
     # sides measured next to it, and take the median of the pairs' overheads
-    ratios = []
+    # and split the run: a one-step run next to it gives the run's fixed cost (validation,
+    # the working frame's copies, the final state) and the steps' own cost
+    ratios, step_ratios, fixed = [], [], []
     for _ in range(max(3, repeat)):
         t = time.perf_counter()
         for _ in range(steps):
@@ -252,10 +254,23 @@ def loop_overhead(n, d, p, steps, repeat):
         t_rhs_pair = (time.perf_counter() - t) / steps
         t = time.perf_counter()
         run()
-        ratios.append((time.perf_counter() - t) / steps / t_rhs_pair - 1.0)
+        t_run = time.perf_counter() - t
+        t = time.perf_counter()
+        simulate(scene, x0, v0, (0.0, h), h, seed=1)
+        t_one = time.perf_counter() - t
+        per = (t_run - t_one) / (steps - 1)
+        ratios.append(t_run / steps / t_rhs_pair - 1.0)
+        step_ratios.append(per / t_rhs_pair - 1.0)
+        fixed.append(t_one - per)
     print(f"    interleaved, {len(ratios)} pairs of a run and {steps} unvalidated right-hand "
           f"sides: overhead median {100 * float(np.median(ratios)):.0f} % (range "
           f"{100 * min(ratios):.0f}–{100 * max(ratios):.0f} %)")
+    print(f"      of which the steps (a {steps}-step run minus a one-step run, per step, "
+          f"against the right-hand side): median {100 * float(np.median(step_ratios)):.0f} % "
+          f"(range {100 * min(step_ratios):.0f}–{100 * max(step_ratios):.0f} %); the run's "
+          f"fixed cost (validation, copies, final state): median "
+          f"{1e3 * float(np.median(fixed)):.0f} ms (range {1e3 * min(fixed):.0f}–"
+          f"{1e3 * max(fixed):.0f} ms)")
 
 
 def section_overhead(args):
