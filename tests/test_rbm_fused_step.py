@@ -72,8 +72,8 @@ def test_thread_counts_give_the_same_states_and_moments(monkeypatch):
     n, d = 3001, 5
     x0, v0 = _data(n, d, 2, seed=5)
     monkeypatch.setattr(_simulate, "FUSED_MIN", 0)
-    from kinred.pairsum import random_batch
-    monkeypatch.setattr(random_batch, "PIECE_BYTES", 512)      # many pieces
+    from kinred.pairsum import _rbm_step
+    monkeypatch.setattr(_rbm_step, "PIECE_BYTES", 512)      # many pieces
     out = {}
     for threads in (1, 2):
         with num_threads(threads):

@@ -72,7 +72,7 @@ import numpy as np
 from .._validate import as_int
 from .. import _parallel
 from ..errors import InvalidInput
-from . import _rbm_kernels
+from . import _rbm_kernels, _rbm_step
 from ._base import PairTerms, check_plan_args
 
 __all__ = ["RandomBatch", "RandomBatchPlan", "pair_probability"]
@@ -199,7 +199,7 @@ class RandomBatch:
         nbt = -(-n // p)
         chunks = tuple((b0, min(b0 + per, nbt)) for b0 in range(0, nbt, per))
         nthreads = max(1, min(_parallel.get_num_threads(), len(chunks)))
-        groups = tuple(tuple(g) for g in _split(chunks, nthreads))
+        groups = tuple(tuple(g) for g in _rbm_step.split(chunks, nthreads))
         return RandomBatchPlan(
             n=n, dim=dim, p=p, terms=terms, q=q, cs=scene.coefficients(n) / q, chunks=chunks,
             groups=groups, max_pairs=max(_rbm_kernels.pairs_in(n, p, b0, b1) for b0, b1 in chunks),
@@ -255,8 +255,8 @@ class RandomBatch:
         ``w`` ``(n,)`` weights; ``shift``, ``centres`` ``(k, dim)`` (``k = 2`` with ``v``, else
         1): the sums are those of ``kinred._rowsum_kernels.row_sums`` of ``x + shift[0]`` and
         ``v + shift[1]`` about ``centres``. Returns ``(r, acc)`` of shapes ``(k, dim)``,
-        ``(k, 4)``, summed over fixed chunks in a fixed order (bit-identical for any thread
-        count).
+        ``(k, 4)``, summed over fixed pieces in a fixed order (bit-identical for any thread
+        count; ``kinred.pairsum._rbm_step``).
 
         Raises
         ------
@@ -280,95 +280,8 @@ class RandomBatch:
                                    f"{shape}{' (writeable)' if write else ''}, got "
                                    f"{type(a).__name__} {getattr(a, 'dtype', '')} "
                                    f"{getattr(a, 'shape', '')}")
-        k = 1 if v is None else 2
-        pieces = _pieces(plan, k)
-        npieces = len(pieces)
-        perm = rng.permutation(plan.n)
-        terms = [t for _, ts in plan.by_source for t, _ in ts]
-        code = {"x": 0, "v": 1}
-        step = _EulerStep(
-            x=x, v=x if v is None else v, order=k, h=float(h),
-            locx=x if local[0] is None else local[0], locv=x if local[1] is None else local[1],
-            flags=np.array([any(t.target == "x" for t in terms), local[0] is not None,
-                            any(t.target == "v" for t in terms), local[1] is not None]),
-            carriers=np.array([code[t.carrier] for t in terms], dtype=np.int64),
-            targets=np.array([code[t.target] for t in terms], dtype=np.int64),
-            w=np.ascontiguousarray(w, dtype=np.float64), shift=np.ascontiguousarray(shift[:k]),
-            c=np.ascontiguousarray(centres[:k]),
-            r=np.zeros((npieces, k, plan.dim)), acc=np.zeros((npieces, k, 4)))
-        state = {"x": x, "v": v}
-        nthreads = max(1, min(_parallel.get_num_threads(), npieces))
-        _parallel.run_parallel(partial(_share_step, plan, state, perm, step),
-                               _split(tuple(enumerate(pieces)), nthreads))
-        r, acc = step.r[0].copy(), step.acc[0].copy()
-        for i in range(1, len(step.r)):             # in the pieces' order, whatever the threads
-            r += step.r[i]
-            acc += step.acc[i]
-        return r, acc
-
-
-@dataclass(eq=False)
-class _EulerStep:
-    """The arguments of :func:`_rbm_kernels.batch_euler` common to all pieces
-    (:func:`_pieces`), and the pieces' row sums ``r[piece], acc[piece]``."""
-
-    x: np.ndarray
-    v: np.ndarray
-    order: int
-    h: float
-    locx: np.ndarray
-    locv: np.ndarray
-    flags: np.ndarray
-    carriers: np.ndarray
-    targets: np.ndarray
-    w: np.ndarray
-    shift: np.ndarray
-    c: np.ndarray
-    r: np.ndarray
-    acc: np.ndarray
-
-
-#: The fused Euler step walks a chunk in pieces whose state rows (``x`` and ``v``) take about
-#: this many bytes, so that the rows its distances and kernel values were computed from are
-#: still in cache when the pieces' sums and update read them again.
-PIECE_BYTES = 2 ** 21
-
-
-def _pieces(plan: RandomBatchPlan, k: int) -> list:
-    """``[(b0, b1), ...]``: the chunks' batches in consecutive pieces of about
-    :data:`PIECE_BYTES` of state rows, in the order of the chunks (fixed by the plan: the
-    sums do not depend on the threads, among which the pieces are dealt in equal runs)."""
-    per = max(1, PIECE_BYTES // (plan.p * plan.dim * 8 * k))
-    return [(s0, min(s0 + per, b1)) for b0, b1 in plan.chunks for s0 in range(b0, b1, per)]
-
-
-def _share_step(plan: RandomBatchPlan, state: dict, perm: np.ndarray, step: _EulerStep,
-                g: int, pieces) -> None:
-    """Thread ``g``'s pieces ``(index, (b0, b1))`` of :meth:`RandomBatch.euler_step`: per
-    piece the squared distances and every term's kernel values (as :func:`_share`), then the
-    piece's fused sums, update and row sums."""
-    nterms = len(step.carriers)
-    mmax = max(_rbm_kernels.pairs_in(plan.n, plan.p, b0, b1) for _, (b0, b1) in pieces)
-    qbuf = np.empty(max(mmax, 1))
-    phis = np.empty((nterms, max(mmax, 1)))
-    n, p = plan.n, plan.p
-    for i, (b0, b1) in pieces:
-        m = _rbm_kernels.pairs_in(n, p, b0, b1)
-        t = 0
-        if m:
-            for s, terms in plan.by_source:
-                q = qbuf[:m]
-                _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
-                for term, value_sq in terms:
-                    if value_sq is not None:
-                        value_sq(q.reshape(1, m), phis[t, :m].reshape(1, m))
-                    else:
-                        phis[t, :m] = term.kernel(np.sqrt(q))
-                    t += 1
-        _rbm_kernels.batch_euler(step.x, step.v, step.order, plan.cs, perm, p, b0, b1,
-                                 phis[:, :max(m, 1)], step.carriers, step.targets, step.h,
-                                 step.locx, step.locv, step.flags, step.w, step.shift, step.c,
-                                 step.r[i], step.acc[i])
+        return _rbm_step.euler_step(plan, x, v, float(h), rng.permutation(plan.n), local, w,
+                                    shift, centres)
 
 def _result_array(plan: RandomBatchPlan, out: dict | None, tgt: str) -> np.ndarray:
     """The array the sums of ``tgt`` are written to: ``out[tgt]`` when given (checked), else
@@ -395,13 +308,6 @@ def _check_distinct(outs: dict, state: dict) -> None:
                 raise InvalidInput(f"out[{name!r}] shares memory with "
                                    f"{other if other.startswith('the') else f'out[{other!r}]'}"
                                    "; give each target its own array, apart from x and v")
-
-
-def _split(items: tuple, k: int) -> list:
-    """``items`` in ``k`` contiguous groups of near-equal length (the first ones longer)."""
-    n = len(items)
-    bounds = [n * g // k for g in range(k + 1)]
-    return [items[bounds[g]:bounds[g + 1]] for g in range(k)]
 
 
 def _share(plan: RandomBatchPlan, state: dict, perm: np.ndarray, outs: dict, g: int,

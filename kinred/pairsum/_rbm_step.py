@@ -1,0 +1,125 @@
+"""The fused Euler step of the random batch backend (:meth:`RandomBatch.euler_step
+<kinred.pairsum.RandomBatch.euler_step>`): the step taken inside the batches.
+
+A batch's rows are read and written by that batch alone, so forward Euler's update of a
+batch right after its pair sums is the update from the whole right-hand side (eq. (1.6)). The
+plan's chunks are walked in pieces of about :data:`PIECE_BYTES` of state rows: per piece the
+squared distances and every term's kernel values (vectorized, as the right-hand side
+computes them), then :func:`kinred.pairsum._rbm_kernels.batch_euler` – per batch its sums,
+the in-place update and the row sums of the new rows for the moments – while the piece's rows
+are in cache. The pieces are dealt to the threads in equal runs and their sums added in the
+pieces' order: the result does not depend on the thread count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from .. import _parallel
+from . import _rbm_kernels
+
+__all__ = ["euler_step", "split", "PIECE_BYTES"]
+
+
+def euler_step(plan, x: np.ndarray, v: np.ndarray | None, h: float, perm: np.ndarray,
+               local: tuple, w: np.ndarray, shift: np.ndarray, centres: np.ndarray) -> tuple:
+    """The step of :meth:`kinred.pairsum.RandomBatch.euler_step` (validated there) for the
+    partition ``perm``: updates ``x, v`` in place, returns the row sums ``(r, acc)``."""
+    k = 1 if v is None else 2
+    pieces = _pieces(plan, k)
+    npieces = len(pieces)
+    terms = [t for _, ts in plan.by_source for t, _ in ts]
+    code = {"x": 0, "v": 1}
+    step = _EulerStep(
+        x=x, v=x if v is None else v, order=k, h=float(h),
+        locx=x if local[0] is None else local[0], locv=x if local[1] is None else local[1],
+        flags=np.array([any(t.target == "x" for t in terms), local[0] is not None,
+                        any(t.target == "v" for t in terms), local[1] is not None]),
+        carriers=np.array([code[t.carrier] for t in terms], dtype=np.int64),
+        targets=np.array([code[t.target] for t in terms], dtype=np.int64),
+        w=np.ascontiguousarray(w, dtype=np.float64), shift=np.ascontiguousarray(shift[:k]),
+        c=np.ascontiguousarray(centres[:k]),
+        r=np.zeros((npieces, k, plan.dim)), acc=np.zeros((npieces, k, 4)))
+    state = {"x": x, "v": v}
+    nthreads = max(1, min(_parallel.get_num_threads(), npieces))
+    _parallel.run_parallel(partial(_share_step, plan, state, perm, step),
+                           split(tuple(enumerate(pieces)), nthreads))
+    r, acc = step.r[0].copy(), step.acc[0].copy()
+    for i in range(1, len(step.r)):             # in the pieces' order, whatever the threads
+        r += step.r[i]
+        acc += step.acc[i]
+    return r, acc
+
+
+@dataclass(eq=False)
+class _EulerStep:
+    """The arguments of :func:`_rbm_kernels.batch_euler` common to all pieces
+    (:func:`_pieces`), and the pieces' row sums ``r[piece], acc[piece]``."""
+
+    x: np.ndarray
+    v: np.ndarray
+    order: int
+    h: float
+    locx: np.ndarray
+    locv: np.ndarray
+    flags: np.ndarray
+    carriers: np.ndarray
+    targets: np.ndarray
+    w: np.ndarray
+    shift: np.ndarray
+    c: np.ndarray
+    r: np.ndarray
+    acc: np.ndarray
+
+
+#: The fused Euler step walks a chunk in pieces whose state rows (``x`` and ``v``) take about
+#: this many bytes, so that the rows its distances and kernel values were computed from are
+#: still in cache when the pieces' sums and update read them again.
+PIECE_BYTES = 2 ** 21
+
+
+def _pieces(plan: RandomBatchPlan, k: int) -> list:
+    """``[(b0, b1), ...]``: the chunks' batches in consecutive pieces of about
+    :data:`PIECE_BYTES` of state rows, in the order of the chunks (fixed by the plan: the
+    sums do not depend on the threads, among which the pieces are dealt in equal runs)."""
+    per = max(1, PIECE_BYTES // (plan.p * plan.dim * 8 * k))
+    return [(s0, min(s0 + per, b1)) for b0, b1 in plan.chunks for s0 in range(b0, b1, per)]
+
+
+def _share_step(plan, state: dict, perm: np.ndarray, step: _EulerStep,
+                g: int, pieces) -> None:
+    """Thread ``g``'s pieces ``(index, (b0, b1))`` of :func:`euler_step`: per
+    piece the squared distances and every term's kernel values (as ``random_batch._share``), then the
+    piece's fused sums, update and row sums."""
+    nterms = len(step.carriers)
+    mmax = max(_rbm_kernels.pairs_in(plan.n, plan.p, b0, b1) for _, (b0, b1) in pieces)
+    qbuf = np.empty(max(mmax, 1))
+    phis = np.empty((nterms, max(mmax, 1)))
+    n, p = plan.n, plan.p
+    for i, (b0, b1) in pieces:
+        m = _rbm_kernels.pairs_in(n, p, b0, b1)
+        t = 0
+        if m:
+            for s, terms in plan.by_source:
+                q = qbuf[:m]
+                _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
+                for term, value_sq in terms:
+                    if value_sq is not None:
+                        value_sq(q.reshape(1, m), phis[t, :m].reshape(1, m))
+                    else:
+                        phis[t, :m] = term.kernel(np.sqrt(q))
+                    t += 1
+        _rbm_kernels.batch_euler(step.x, step.v, step.order, plan.cs, perm, p, b0, b1,
+                                 phis[:, :max(m, 1)], step.carriers, step.targets, step.h,
+                                 step.locx, step.locv, step.flags, step.w, step.shift, step.c,
+                                 step.r[i], step.acc[i])
+
+
+def split(items: tuple, k: int) -> list:
+    """``items`` in ``k`` contiguous groups of near-equal length (the first ones longer)."""
+    n = len(items)
+    bounds = [n * g // k for g in range(k + 1)]
+    return [items[bounds[g]:bounds[g + 1]] for g in range(k)]
