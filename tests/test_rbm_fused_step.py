@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Morse,
-                             Scene, SelfPropulsion)
+from kinred.dynamics import (Aggregation, Alignment, AttractionRepulsion, CuckerSmale, Drift,
+                             Morse, Scene, SelfPropulsion)
 from kinred._parallel import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import VectorField, simulate
-from kinred.integrate import _simulate, _solvers
+from kinred.integrate import _save, _simulate, _solvers
 from kinred.observables import gamma, lambda_
 from kinred.pairsum import RandomBatch
 from kinred.pairsum import _rbm_kernels
@@ -40,7 +40,8 @@ def _runs(scene, x0, v0, monkeypatch, steps=6, h=0.01, seed=3):
         got = step(self, *args)
         calls.append(got is not None)
         return got
-    monkeypatch.setattr(_simulate, "FUSED_MIN", 0)
+    monkeypatch.setattr(_simulate, "FUSED_MIN", 0)        # the fused loop ...
+    monkeypatch.setattr(_save, "FUSED_MIN", 0)            # ... and Γ, Λ from its sums
     monkeypatch.setattr(_solvers.VectorField, "euler_step", counted)
     fused = simulate(scene, x0, v0, (0.0, steps * h), h, seed=seed)
     monkeypatch.setattr(_solvers.VectorField, "euler_step", lambda self, *a: None)
@@ -48,8 +49,11 @@ def _runs(scene, x0, v0, monkeypatch, steps=6, h=0.01, seed=3):
     return fused, plain, sum(calls)
 
 
-@pytest.mark.parametrize("effects,order", [(SECOND[:1], 2), (SECOND, 2), (FIRST, 1),
-                                           (FIRST + [Aggregation(Morse(soft=0.3))], 1)])
+@pytest.mark.parametrize("effects,order", [
+    (SECOND[:1], 2), (SECOND, 2), (FIRST, 1), (FIRST + [Aggregation(Morse(soft=0.3))], 1),
+    # several local effects on one target, added in the scene's order
+    (SECOND + [Drift([0.3, -1.7, 2.9])], 2), (FIRST + [Drift([0.1, 0.2, -0.3])], 1),
+    (FIRST + [Drift([0.1, 0.2, -0.3]), Drift([1e-3, 7.0, -0.01])], 1)])
 @pytest.mark.parametrize("n,p,block", [(41, 4, None), (37, 3, 5), (50, 7, 11), (2, 2, None)])
 def test_fused_steps_equal_the_right_hand_side_and_update_bitwise(effects, order, n, p, block,
                                                                   monkeypatch):
@@ -72,6 +76,7 @@ def test_thread_counts_give_the_same_states_and_moments(monkeypatch):
     n, d = 3001, 5
     x0, v0 = _data(n, d, 2, seed=5)
     monkeypatch.setattr(_simulate, "FUSED_MIN", 0)
+    monkeypatch.setattr(_save, "FUSED_MIN", 0)
     from kinred.pairsum import _rbm_step
     monkeypatch.setattr(_rbm_step, "PIECE_BYTES", 512)      # many pieces
     out = {}
@@ -116,8 +121,8 @@ def test_compiled_fused_step_equals_its_numpy_twin(order):
     effects = SECOND if order == 2 else FIRST
     sc = Scene(effects, "sum", pairsum=RandomBatch(p=p))
     plan = sc._plan(n, d)
-    locx = None if order == 2 else rng.normal(size=(n, d))
-    locv = rng.normal(size=(n, d)) if order == 2 else None
+    locx = () if order == 2 else (rng.normal(size=(n, d)), rng.normal(size=(n, d)))
+    locv = (rng.normal(size=(n, d)),) if order == 2 else ()
     perm = np.random.default_rng(5).permutation(n)
     terms = [(t.kernel, t.source, t.carrier, t.target) for t in plan.terms.terms]
     tx, tv = _rbm_kernels.batch_euler_numpy(x, v, plan.cs, perm, p, terms, 0.01, locx, locv)
@@ -162,20 +167,57 @@ def test_dense_and_lone_agents_take_the_unfused_step(monkeypatch):
 
 
 def test_bad_input():
+    """Every argument of RandomBatch.euler_step is checked before the state is touched: an
+    InvalidInput naming it (no numba TypingError, no read past an array's end)."""
     n, d = 10, 2
     x, v = _data(n, d, 2)
+    x0, v0 = x.copy(), v.copy()
     sc = Scene(SECOND, "mean", pairsum=RandomBatch(p=2))
     plan = sc._plan(n, d)
     rb, gen, w, z = RandomBatch(p=2), np.random.default_rng(0), np.ones(n), np.zeros((2, d))
-    with pytest.raises(InvalidInput, match="RandomBatchPlan"):
-        rb.euler_step(object(), x, v, 0.1, gen, (None, None), w, z, z)
-    with pytest.raises(InvalidInput, match="generator"):
-        rb.euler_step(plan, x, v, 0.1, None, (None, None), w, z, z)
-    with pytest.raises(InvalidInput, match="local v drift must be a C-contiguous float64"):
-        rb.euler_step(plan, x, v, 0.1, gen, (None, np.ones((n, d), np.float32)), w, z, z)
+    none = ((), ())
+    cases = [
+        ("RandomBatchPlan", (object(), x, v, 0.1, gen, none, w, z, z)),
+        ("generator", (plan, x, v, 0.1, None, none, w, z, z)),
+        ("h", (plan, x, v, float("nan"), gen, none, w, z, z)),
+        ("h", (plan, x, v, "a", gen, none, w, z, z)),
+        ("h", (plan, x, v, None, gen, none, w, z, z)),
+        ("v must be given", (plan, x, None, 0.1, gen, none, w, z, z)),
+        ("local must be a pair", (plan, x, v, 0.1, gen, None, w, z, z)),
+        ("local must be a pair", (plan, x, v, 0.1, gen, ((),), w, z, z)),
+        ("local v drift 0 must be a C-contiguous float64",
+         (plan, x, v, 0.1, gen, ((), (np.ones((n, d), np.float32),)), w, z, z)),
+        ("x must be a C-contiguous", (plan, np.asfortranarray(x), v, 0.1, gen, none, w, z, z)),
+        ("x must be a C-contiguous", (plan, [[0.0] * d] * n, v, 0.1, gen, none, w, z, z)),
+        ("x must be .* of shape", (plan, x[:5].copy(), v, 0.1, gen, none, w, z, z)),
+        ("w", (plan, x, v, 0.1, gen, none, w[:5], z, z)),
+        ("w", (plan, x, v, 0.1, gen, none, np.ones((n, 1)), z, z)),
+        ("shift", (plan, x, v, 0.1, gen, none, w, z[:1], z)),
+        ("shift", (plan, x, v, 0.1, gen, none, w, np.zeros(d), z)),
+        ("centres", (plan, x, v, 0.1, gen, none, w, z, np.zeros((2, 1)))),
+        ("x shares memory with v", (plan, x, x, 0.1, gen, none, w, z, z)),
+        ("v shares memory with local v drift 0", (plan, x, v, 0.1, gen, ((), (v,)), w, z, z)),
+    ]
+    for match, args in cases:
+        with pytest.raises(InvalidInput, match=match):
+            rb.euler_step(*args)
+    ro = v.copy()
+    ro.flags.writeable = False
     with pytest.raises(InvalidInput, match="v must be .*writeable"):
-        ro = v.copy()
-        ro.flags.writeable = False
-        rb.euler_step(plan, x, ro, 0.1, gen, (None, None), w, z, z)
-    with pytest.raises(InvalidInput, match="x must be a C-contiguous"):
-        rb.euler_step(plan, np.asfortranarray(x), v, 0.1, gen, (None, None), w, z, z)
+        rb.euler_step(plan, x, ro, 0.1, gen, none, w, z, z)
+    first = Scene(FIRST, "mean", pairsum=RandomBatch(p=2))._plan(n, d)
+    with pytest.raises(InvalidInput, match="v must be None"):
+        rb.euler_step(first, x, v, 0.1, gen, none, w, z, z)
+    assert np.array_equal(x, x0) and np.array_equal(v, v0)        # nothing was stepped
+
+
+def test_warnings_of_a_local_drift_reach_the_caller_on_the_fused_path(monkeypatch):
+    """The fused step does not hide the floating-point warnings of the scene's own drifts
+    (numpy's error state is the caller's, as on the unfused path)."""
+    from kinred.dynamics import Field
+    x0, v0 = _data(30, 2, 2)
+    sc = Scene(SECOND[:1] + [Field(lambda t, x, v: np.log(x - x))], "mean",
+               pairsum=RandomBatch(p=3))
+    monkeypatch.setattr(_simulate, "FUSED_MIN", 0)
+    with np.errstate(divide="raise"), pytest.raises(FloatingPointError):
+        simulate(sc, x0, v0, (0.0, 0.02), 0.01, seed=1)

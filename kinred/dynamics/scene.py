@@ -285,25 +285,26 @@ class Scene:
     def _euler_fused(self, x, v, t, h, rng, w, shift, centres):
         """Forward Euler's step in place by the pair-sum backend's fused step (a backend with
         ``euler_step``, e.g. :meth:`kinred.pairsum.RandomBatch.euler_step`), the local drifts
-        evaluated first at the old state: ``(r, acc)``, the row sums of the new state for its
-        moments; None (nothing done) when the backend has no fused step or the scene no pair
-        sums. The new state equals ``_rhs`` and the update bit for bit when each target has
-        at most one local effect (with several their drifts are summed first: equal to
-        round-off)."""
+        evaluated first at the old state (each used as it comes when it is a C-contiguous
+        float64 ``(N, d)`` array apart from the state, else copied): ``(r, acc)``, the row
+        sums of the new state for its moments; None (nothing done) when the backend has no
+        fused step or the scene no pair sums. The new state equals ``_rhs`` and the update
+        bit for bit (the local drifts are added in the scene's order)."""
         step = getattr(self.pairsum, "euler_step", None)
         n = x.shape[0]
         if step is None or not self.pair_terms or n < 2:
             return None
         plan = self._plan(n, x.shape[1])
-        local = {"x": None, "v": None}
+        local = {"x": [], "v": []}
         for e in self._local:
-            f = np.broadcast_to(np.asarray(e.drift(x, v, t), dtype=float), x.shape)
-            tgt = self._tgt(e)
-            if local[tgt] is None:
-                local[tgt] = np.array(f, dtype=float, order="C")
-            else:
-                local[tgt] += f
-        return step(plan, x, v, h, rng, (local["x"], local["v"]), w, shift, centres)
+            f = e.drift(x, v, t)
+            if (type(f) is not np.ndarray or f.dtype != np.float64 or f.shape != x.shape
+                    or not f.flags.c_contiguous or np.may_share_memory(f, x)
+                    or (v is not None and np.may_share_memory(f, v))):
+                f = np.array(np.broadcast_to(np.asarray(f, dtype=float), x.shape), order="C")
+            local[self._tgt(e)].append(f)
+        return step(plan, x, v, h, rng, (tuple(local["x"]), tuple(local["v"])), w, shift,
+                    centres)
 
     def info(self) -> dict:
         """What the scene's pair sums run on: ``{"backend": repr, "pairsum": ...}`` with the

@@ -66,8 +66,8 @@ from ..dynamics import get_num_threads
 
 __all__ = ["euler_pair", "euler_one", "euler", "sweep", "moments", "euler_numpy",
            "moments_numpy", "euler_sweep", "euler_sweep_v", "euler_sweep_one", "euler_moments",
-           "euler_moments_numpy", "step_moments", "shifted_copy", "frame", "add_shift", "copy_sweep",
-           "copy_moments", "state_moments",
+           "euler_moments_numpy", "step_moments", "shifted_copy", "frame", "add_shift",
+           "copy_sweep", "copy_moments", "state_moments",
            "Moments", "BLOCK", "RECENTRE", "SPLIT_MIN"]
 
 #: fastmath of :func:`moments`: re-association and contraction of its sums only (vectorized
@@ -430,10 +430,11 @@ def step_moments(x, v, w, shift, centres, sums):
     with np.errstate(all="ignore"):             # NaN and Inf propagate to the caller's test
         c = np.array(centres[:k], dtype=float)
         c[~np.isfinite(c)] = 0.0
-        got = sums(sh, c)
-        if got is None:
-            return None
-        r, acc = got
+    got = sums(sh, c)       # outside: the drift's own warnings stay the caller's to see
+    if got is None:
+        return None
+    r, acc = got
+    with np.errstate(all="ignore"):
         out = []
         for a, z in enumerate((x, v)[:k]):
             centres[a][:] = c[a]

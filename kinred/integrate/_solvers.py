@@ -199,9 +199,11 @@ def _f64_like(x, arrays) -> bool:
 class EulerMoments:
     """Forward Euler's in-place step (:class:`ExplicitRK` of ``EULER``) that also gives the
     moments ``(F, S, T)`` (:func:`._kernels.state_moments`) of the new positions and
-    velocities, from the same pass over the state (:func:`._kernels.euler_moments`): the
-    loop's finiteness test, the divergence guard's ``Γ`` and the recorded ``Γ`` and ``Λ``
-    need no pass of their own. The state is bit-identical to :class:`ExplicitRK`'s step.
+    velocities, from the same pass over the state (:func:`._kernels.euler_moments`; with a
+    backend that takes the step itself, its fused step: :meth:`VectorField.euler_step`,
+    :func:`._kernels.step_moments`): the loop's finiteness test, the divergence guard's
+    ``Γ`` and the recorded ``Γ`` and ``Λ`` need no pass of their own. The state is
+    bit-identical to :class:`ExplicitRK`'s step.
 
     Parameters
     ----------

@@ -273,6 +273,13 @@ class PairSum(Protocol):
     reuses two arrays for the whole run of a one-stage method (:class:`RandomBatch` at large
     ``N·d``, where fresh pages cost about 10 % of an evaluation).
 
+    A backend may offer forward Euler's step itself, taken inside its pair sums:
+    ``euler_step(plan, x, v, h, rng, local, w, shift, centres)`` updates ``x, v`` in place to
+    the step from the drift ``evaluate`` plus the local drifts ``local`` would give and returns
+    the row sums of the new state's moments (:meth:`RandomBatch.euler_step`, whose batches
+    touch only their own rows); ``simulate``'s Euler loop then calls it instead of
+    ``evaluate`` and the update (``Scene._euler_fused``).
+
     A backend that draws random numbers declares the attribute ``stochastic = True``:
     :func:`~kinred.integrate.simulate` then passes the run's generator (from its ``seed``) to
     every evaluation; without it a scene without noise is deterministic and gets ``rng=None``.

@@ -19,15 +19,16 @@ Kernels
     batch are first set to 0 (the first term of a target: the result arrays need no clearing
     pass of their own, and the rows are cleared while in cache). Twin:
     :func:`batch_field_numpy`.
-``batch_euler(X, V, order, cs, perm, p, b0, b1, phis, carriers, targets, h, locx, locv,
-flags, w, shift, c, r, acc)``
+``batch_euler(X, V, order, cs, perm, p, b0, b1, phis, carriers, targets, h, locx, nlx, locv,
+nlv, px, pv, w, shift, c, r, acc)``
     Forward Euler's step (eq. (1.6)) of the batches ``[b0, b1)``, in place, batch by batch:
     the batch's pair sums of every term (``phis[t]``, carrier ``carriers[t]`` and target
     ``targets[t]``, 0 for ``x`` and 1 for ``v``, accumulated as :func:`batch_accumulate`
     does, in the same order) into a ``(2, p, d)`` scratch, then the update of the batch's rows
     (:func:`_batch_apply`: ``x ← x + h·(v + Fₓ + locₓ)`` for ``order = 2``, ``x + h·(Fₓ +
-    locₓ)`` for 1, ``v ← v + h·(F_v + loc_v)``; ``flags`` says which of ``Fₓ, locₓ, F_v,
-    loc_v`` exist, the others are not read), then the row sums of the new rows
+    locₓ)`` for 1, ``v ← v + h·(F_v + loc_v)``, the local drifts being the first ``nlx``
+    (``nlv``) arrays of the tuple ``locx`` (``locv``) added one after the other; ``px``,
+    ``pv`` say whether a pair term targets ``x``, ``v``), then the row sums of the new rows
     (:func:`kinred._rowsum_kernels.row_sums` of ``x + shift[0]`` and ``v + shift[1]`` about
     ``c``) into ``r, acc``. A batch's rows are read and written only by that batch, so the
     in-place update equals the update from a whole right-hand side: the new state is
@@ -131,26 +132,37 @@ def _batch_terms(X, V, cs, perm, s0, s1, phis, k0, carriers, targets, F):  # pra
 
 
 @njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
-def _batch_apply(X, V, order, F, h, locx, locv, px, lx, pv, lv, perm, s0, s1):  # pragma: no cover
-    """Euler's update of one batch's rows from its sums ``F`` (no fastmath: numpy's rounding
-    of ``dx = v + Fₓ (+ locₓ)`` and of ``x + dx·h``). ``F`` is overwritten with the drift."""
+def _add_locals(f, locs, nl, i, has_pair):  # pragma: no cover - compiled
+    """``f ← f + loc₁ᵢ + loc₂ᵢ + …`` in order (``f ← loc₁ᵢ + …`` without a pair term):
+    numpy's ``dv += loc`` of the scene's local effects, one after the other."""
+    d = f.shape[0]
+    for q in range(nl):
+        li = locs[q][i]
+        if q == 0 and not has_pair:
+            for l in range(d):
+                f[l] = li[l]
+        else:
+            for l in range(d):
+                f[l] = f[l] + li[l]
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def _batch_apply(X, V, order, F, h, locx, nlx, locv, nlv, px, pv, perm, s0,
+                 s1):  # pragma: no cover - compiled
+    """Euler's update of one batch's rows from its sums ``F`` and the local drifts (no
+    fastmath: numpy's rounding of ``dx = v + Fₓ + locₓ…`` and of ``x + dx·h``). ``F`` is
+    overwritten with the drift."""
     d = X.shape[1]
     for a in range(s1 - s0):
         i = perm[s0 + a]
         fx = F[0, a]
         fv = F[1, a]
         x = X[i]
-        if lx:
-            lxi = locx[i]
-            if px:
-                for l in range(d):
-                    fx[l] = fx[l] + lxi[l]
-            else:
-                for l in range(d):
-                    fx[l] = lxi[l]
+        _add_locals(fx, locx, nlx, i, px)
+        hx = px or nlx > 0
         if order == 2:
             v = V[i]
-            if px or lx:
+            if hx:
                 for l in range(d):
                     fx[l] = v[l] + fx[l]
                 for l in range(d):
@@ -158,35 +170,26 @@ def _batch_apply(X, V, order, F, h, locx, locv, px, lx, pv, lv, perm, s0, s1):  
             else:
                 for l in range(d):
                     x[l] = x[l] + v[l] * h
-            if lv:
-                lvi = locv[i]
-                if pv:
-                    for l in range(d):
-                        fv[l] = fv[l] + lvi[l]
-                else:
-                    for l in range(d):
-                        fv[l] = lvi[l]
-            if pv or lv:
+            _add_locals(fv, locv, nlv, i, pv)
+            if pv or nlv > 0:
                 for l in range(d):
                     v[l] = v[l] + fv[l] * h
             else:
                 for l in range(d):
                     v[l] = v[l] + 0.0 * h
+        elif hx:
+            for l in range(d):
+                x[l] = x[l] + fx[l] * h
         else:
-            if px or lx:
-                for l in range(d):
-                    x[l] = x[l] + fx[l] * h
-            else:
-                for l in range(d):
-                    x[l] = x[l] + 0.0 * h
+            for l in range(d):
+                x[l] = x[l] + 0.0 * h
 
 
 @njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
-def batch_euler(X, V, order, cs, perm, p, b0, b1, phis, carriers, targets, h, locx, locv,
-                flags, w, shift, c, r, acc):  # pragma: no cover - compiled
+def batch_euler(X, V, order, cs, perm, p, b0, b1, phis, carriers, targets, h, locx, nlx,
+                locv, nlv, px, pv, w, shift, c, r, acc):  # pragma: no cover - compiled
     """The module's ``batch_euler``: returns the number of pairs visited."""
     n, d = X.shape
-    px, lx, pv, lv = flags[0], flags[1], flags[2], flags[3]
     kk = 2 if order == 2 else 1
     F = np.empty((2, p, d))
     blk = np.zeros((2, d))
@@ -202,7 +205,7 @@ def batch_euler(X, V, order, cs, perm, p, b0, b1, phis, carriers, targets, h, lo
         s0 = b * p
         s1 = min(s0 + p, n)
         k = _batch_terms(X, V, cs, perm, s0, s1, phis, k, carriers, targets, F)
-        _batch_apply(X, V, order, F, h, locx, locv, px, lx, pv, lv, perm, s0, s1)
+        _batch_apply(X, V, order, F, h, locx, nlx, locv, nlv, px, pv, perm, s0, s1)
         for a in range(s0, s1):
             i = perm[a]
             row_sums(X, i, 0, w[i], shift, c, blk, part)
@@ -255,17 +258,18 @@ def batch_field_numpy(S: np.ndarray, Z: np.ndarray, cs: np.ndarray, perm: np.nda
     return out
 
 
-def batch_euler_numpy(x, v, cs, perm, p, terms, h, locx, locv):
+def batch_euler_numpy(x, v, cs, perm, p, terms, h, locx=(), locv=()):
     """Twin of :func:`batch_euler`'s state update: ``terms`` is a list of
     ``(kernel, source, carrier, target)`` (names ``"x"``/``"v"``), each summed by
-    :func:`batch_field_numpy`; then ``x ← x + h·(v + Fₓ + locₓ)`` (order 2, ``v`` given) or
-    ``x + h·(Fₓ + locₓ)``, ``v ← v + h·(F_v + loc_v)``, as new arrays."""
+    :func:`batch_field_numpy`; then ``x ← x + h·(v + Fₓ + Σ locₓ)`` (order 2, ``v`` given) or
+    ``x + h·(Fₓ + Σ locₓ)``, ``v ← v + h·(F_v + Σ loc_v)`` (``locx``, ``locv``: sequences of
+    local drifts), as new arrays."""
     state = {"x": x, "v": v}
     sums = {"x": np.zeros_like(x), "v": None if v is None else np.zeros_like(v)}
     for kernel, source, carrier, target in terms:
         sums[target] += batch_field_numpy(state[source], state[carrier], cs, perm, p, kernel)
-    fx = sums["x"] + (0.0 if locx is None else locx)
+    fx = sums["x"] + sum(locx, np.zeros_like(x))
     if v is None:
         return x + fx * h, None
-    fv = sums["v"] + (0.0 if locv is None else locv)
+    fv = sums["v"] + sum(locv, np.zeros_like(v))
     return x + (v + fx) * h, v + fv * h

@@ -27,7 +27,8 @@ __all__ = ["euler_step", "split", "PIECE_BYTES"]
 def euler_step(plan, x: np.ndarray, v: np.ndarray | None, h: float, perm: np.ndarray,
                local: tuple, w: np.ndarray, shift: np.ndarray, centres: np.ndarray) -> tuple:
     """The step of :meth:`kinred.pairsum.RandomBatch.euler_step` (validated there) for the
-    partition ``perm``: updates ``x, v`` in place, returns the row sums ``(r, acc)``."""
+    partition ``perm``: updates ``x, v`` in place, returns the row sums ``(r, acc)``.
+    ``local = (drifts of x, drifts of v)``, two tuples of arrays (possibly empty)."""
     k = 1 if v is None else 2
     pieces = _pieces(plan, k)
     npieces = len(pieces)
@@ -35,9 +36,9 @@ def euler_step(plan, x: np.ndarray, v: np.ndarray | None, h: float, perm: np.nda
     code = {"x": 0, "v": 1}
     step = _EulerStep(
         x=x, v=x if v is None else v, order=k, h=float(h),
-        locx=x if local[0] is None else local[0], locv=x if local[1] is None else local[1],
-        flags=np.array([any(t.target == "x" for t in terms), local[0] is not None,
-                        any(t.target == "v" for t in terms), local[1] is not None]),
+        locx=tuple(local[0]) or (x,), nlx=len(local[0]), locv=tuple(local[1]) or (x,),
+        nlv=len(local[1]), px=any(t.target == "x" for t in terms),
+        pv=any(t.target == "v" for t in terms),
         carriers=np.array([code[t.carrier] for t in terms], dtype=np.int64),
         targets=np.array([code[t.target] for t in terms], dtype=np.int64),
         w=np.ascontiguousarray(w, dtype=np.float64), shift=np.ascontiguousarray(shift[:k]),
@@ -63,9 +64,12 @@ class _EulerStep:
     v: np.ndarray
     order: int
     h: float
-    locx: np.ndarray
-    locv: np.ndarray
-    flags: np.ndarray
+    locx: tuple
+    nlx: int
+    locv: tuple
+    nlv: int
+    px: bool
+    pv: bool
     carriers: np.ndarray
     targets: np.ndarray
     w: np.ndarray
@@ -81,7 +85,7 @@ class _EulerStep:
 PIECE_BYTES = 2 ** 21
 
 
-def _pieces(plan: RandomBatchPlan, k: int) -> list:
+def _pieces(plan, k: int) -> list:
     """``[(b0, b1), ...]``: the chunks' batches in consecutive pieces of about
     :data:`PIECE_BYTES` of state rows, in the order of the chunks (fixed by the plan: the
     sums do not depend on the threads, among which the pieces are dealt in equal runs)."""
@@ -91,9 +95,9 @@ def _pieces(plan: RandomBatchPlan, k: int) -> list:
 
 def _share_step(plan, state: dict, perm: np.ndarray, step: _EulerStep,
                 g: int, pieces) -> None:
-    """Thread ``g``'s pieces ``(index, (b0, b1))`` of :func:`euler_step`: per
-    piece the squared distances and every term's kernel values (as ``random_batch._share``), then the
-    piece's fused sums, update and row sums."""
+    """Thread ``g``'s pieces ``(index, (b0, b1))`` of :func:`euler_step`: per piece the
+    squared distances and every term's kernel values (as ``random_batch._share``), then
+    the piece's fused sums, update and row sums."""
     nterms = len(step.carriers)
     mmax = max(_rbm_kernels.pairs_in(plan.n, plan.p, b0, b1) for _, (b0, b1) in pieces)
     qbuf = np.empty(max(mmax, 1))
@@ -114,8 +118,8 @@ def _share_step(plan, state: dict, perm: np.ndarray, step: _EulerStep,
                     t += 1
         _rbm_kernels.batch_euler(step.x, step.v, step.order, plan.cs, perm, p, b0, b1,
                                  phis[:, :max(m, 1)], step.carriers, step.targets, step.h,
-                                 step.locx, step.locv, step.flags, step.w, step.shift, step.c,
-                                 step.r[i], step.acc[i])
+                                 step.locx, step.nlx, step.locv, step.nlv, step.px, step.pv,
+                                 step.w, step.shift, step.c, step.r[i], step.acc[i])
 
 
 def split(items: tuple, k: int) -> list:

@@ -69,7 +69,7 @@ from functools import partial
 
 import numpy as np
 
-from .._validate import as_int
+from .._validate import as_array, as_float, as_int
 from .. import _parallel
 from ..errors import InvalidInput
 from . import _rbm_kernels, _rbm_step
@@ -247,32 +247,48 @@ class RandomBatch:
                    centres: np.ndarray) -> tuple:
         """Forward Euler's step (eq. (1.6)) with the pair sums of one partition, in place:
         ``x ← x + h·dx``, ``v ← v + h·dv`` with ``(dx, dv)`` the drift that
-        :meth:`evaluate` (same ``rng`` draw) plus the scene's local drifts ``local =
-        (locₓ, loc_v)`` (arrays ``(n, dim)`` or None) give, bit for bit, and the row sums of
-        the new state for its moments, from one pass over the state (each batch's rows read,
-        summed, updated and summed again while in cache: no result arrays, no second pass).
+        :meth:`evaluate` (same ``rng`` draw) plus the scene's local drifts give, bit for bit,
+        and the row sums of the new state for its moments, from one pass over the state
+        (each batch's rows read, summed, updated and summed again while in cache: no result
+        arrays, no second pass).
 
-        ``w`` ``(n,)`` weights; ``shift``, ``centres`` ``(k, dim)`` (``k = 2`` with ``v``, else
-        1): the sums are those of ``kinred._rowsum_kernels.row_sums`` of ``x + shift[0]`` and
-        ``v + shift[1]`` about ``centres``. Returns ``(r, acc)`` of shapes ``(k, dim)``,
-        ``(k, 4)``, summed over fixed pieces in a fixed order (bit-identical for any thread
-        count; ``kinred.pairsum._rbm_step``).
+        ``v`` is given exactly when a term targets ``v`` (second-order scenes). ``local =
+        (drifts of x, drifts of v)``: two sequences of ``(n, dim)`` arrays, added in their
+        order (as ``Scene._rhs`` adds its local effects). ``w`` ``(n,)`` weights; ``shift``,
+        ``centres`` ``(k, dim)`` (``k = 2`` with ``v``, else 1): the sums are those of
+        ``kinred._rowsum_kernels.row_sums`` of ``x + shift[0]`` and ``v + shift[1]`` about
+        ``centres``. Returns ``(r, acc)`` of shapes ``(k, dim)``, ``(k, 4)``, summed over
+        fixed pieces in a fixed order (bit-identical for any thread count;
+        ``kinred.pairsum._rbm_step``). A kernel that raises mid-step leaves the state
+        partly stepped (the pieces other threads finished).
 
         Raises
         ------
         InvalidInput
-            A plan of another backend or shape, ``rng`` not a Generator, or state or local
-            arrays that are not C-contiguous float64 ``(n, dim)`` (the state writeable).
+            A plan of another backend or shape; ``rng`` not a Generator; ``h`` not a finite
+            number; ``v`` given or missing against the plan's terms; state or local arrays
+            that are not C-contiguous float64 ``(n, dim)`` (the state writeable, apart from
+            every other array); ``w``, ``shift`` or ``centres`` not finite float arrays of
+            the shapes above.
         """
-        if not isinstance(plan, RandomBatchPlan) or x.shape != (plan.n, plan.dim):
-            raise InvalidInput(f"plan must be a RandomBatchPlan for states of shape (n, dim) = "
-                               f"{getattr(plan, 'n', '?'), getattr(plan, 'dim', '?')}; got "
-                               f"{type(plan).__name__} and x of shape {x.shape}")
+        if not isinstance(plan, RandomBatchPlan):
+            raise InvalidInput(f"plan must be a RandomBatchPlan, got {type(plan).__name__}")
         if not isinstance(rng, np.random.Generator):
             raise InvalidInput(f"RandomBatch needs the run's random generator, got rng={rng!r}")
-        shape = (plan.n, plan.dim)
-        for name, a, write in (("x", x, True), ("v", v, True), ("local x drift", local[0], False),
-                               ("local v drift", local[1], False)):
+        h = as_float(h, "h")
+        shape, order2 = (plan.n, plan.dim), "v" in plan.targets
+        if (v is not None) != order2:
+            raise InvalidInput(f"v must be {'given' if order2 else 'None'} for this plan (its "
+                               f"terms target {plan.targets}), got "
+                               f"{'None' if v is None else type(v).__name__}")
+        if (not isinstance(local, (tuple, list)) or len(local) != 2
+                or not all(isinstance(g, (tuple, list)) for g in local)):
+            raise InvalidInput(f"local must be a pair (drifts of x, drifts of v) of sequences of "
+                               f"arrays, got {type(local).__name__}")
+        arrays = [("x", x, True), ("v", v, True)] + [
+            (f"local {t} drift {q}", a, False) for t, g in zip("xv", local)
+            for q, a in enumerate(g)]
+        for name, a, write in arrays:
             if a is not None and (type(a) is not np.ndarray or a.dtype != np.float64
                                   or a.shape != shape or not a.flags.c_contiguous
                                   or (write and not a.flags.writeable)):
@@ -280,8 +296,18 @@ class RandomBatch:
                                    f"{shape}{' (writeable)' if write else ''}, got "
                                    f"{type(a).__name__} {getattr(a, 'dtype', '')} "
                                    f"{getattr(a, 'shape', '')}")
-        return _rbm_step.euler_step(plan, x, v, float(h), rng.permutation(plan.n), local, w,
-                                    shift, centres)
+        for i, (name, a, write) in enumerate(arrays):
+            for other, b, _ in arrays[i + 1:]:
+                if write and a is not None and b is not None and np.may_share_memory(a, b):
+                    raise InvalidInput(f"{name} shares memory with {other}: the step writes "
+                                       f"{name} while it reads {other}; pass copies")
+        k = 2 if order2 else 1
+        w = as_array(w, "w", shape=(plan.n,))
+        shift = as_array(shift, "shift", shape=(k, plan.dim))
+        centres = as_array(centres, "centres", shape=(k, plan.dim))
+        return _rbm_step.euler_step(plan, x, v, h, rng.permutation(plan.n), local, w, shift,
+                                    centres)
+
 
 def _result_array(plan: RandomBatchPlan, out: dict | None, tgt: str) -> np.ndarray:
     """The array the sums of ``tgt`` are written to: ``out[tgt]`` when given (checked), else
