@@ -21,7 +21,7 @@ import numpy as np
 from .. import _parallel
 from . import _rbm_kernels
 
-__all__ = ["euler_step", "split", "PIECE_BYTES"]
+__all__ = ["euler_step", "split", "term_values", "PIECE_BYTES"]
 
 
 def euler_step(plan, x: np.ndarray, v: np.ndarray | None, h: float, perm: np.ndarray,
@@ -105,21 +105,34 @@ def _share_step(plan, state: dict, perm: np.ndarray, step: _EulerStep,
     n, p = plan.n, plan.p
     for i, (b0, b1) in pieces:
         m = _rbm_kernels.pairs_in(n, p, b0, b1)
-        t = 0
-        if m:
-            for s, terms in plan.by_source:
-                q = qbuf[:m]
-                _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
-                for term, value_sq in terms:
-                    if value_sq is not None:
-                        value_sq(q.reshape(1, m), phis[t, :m].reshape(1, m))
-                    else:
-                        phis[t, :m] = term.kernel(np.sqrt(q))
-                    t += 1
+        if m:       # every term's values into its row of phis
+            for _ in term_values(plan, state, perm, b0, b1, qbuf[:m],
+                                 lambda t, q, last: phis[t, :m]):
+                pass
         _rbm_kernels.batch_euler(step.x, step.v, step.order, plan.cs, perm, p, b0, b1,
                                  phis[:, :max(m, 1)], step.carriers, step.targets, step.h,
                                  step.locx, step.nlx, step.locv, step.nlv, step.px, step.pv,
                                  step.w, step.shift, step.c, step.r[i], step.acc[i])
+
+
+def term_values(plan, state: dict, perm: np.ndarray, b0: int, b1: int, q: np.ndarray,
+                dest):
+    """Per source the squared distances of the pairs of batches ``[b0, b1)`` into ``q``, then
+    per term (in ``plan.by_source`` order) its kernel values into ``dest(t, q, last)`` (``t``
+    the term's index, ``last``: the source's last term, which may take ``q`` itself); yields
+    ``(term, values)`` before the next term or source overwrites them. The one computation
+    of the kernel values of ``random_batch._share`` and of :func:`euler_step`."""
+    m, t = q.shape[0], 0
+    for s, terms in plan.by_source:
+        _rbm_kernels.batch_sqdist(state[s], perm, plan.p, b0, b1, q)
+        for idx, (term, value_sq) in enumerate(terms):
+            phi = dest(t, q, idx == len(terms) - 1)
+            if value_sq is not None:
+                value_sq(q.reshape(1, m), phi.reshape(1, m))
+            else:
+                phi[...] = term.kernel(np.sqrt(q))
+            yield term, phi
+            t += 1
 
 
 def split(items: tuple, k: int) -> list:

@@ -350,16 +350,10 @@ def _share(plan: RandomBatchPlan, state: dict, perm: np.ndarray, outs: dict, g: 
                 outs[tgt][perm[b0 * p:min(b1 * p, n)]] = 0.0
             continue
         cleared = set()
-        for s, terms in plan.by_source:
-            q = qbuf[:m]
-            _rbm_kernels.batch_sqdist(state[s], perm, p, b0, b1, q)
-            for idx, (t, value_sq) in enumerate(terms):
-                # the last term of a source may overwrite the distances
-                phi = q if idx == len(terms) - 1 else pbuf[:m]
-                if value_sq is not None:
-                    value_sq(q.reshape(1, m), phi.reshape(1, m))
-                else:
-                    phi[...] = t.kernel(np.sqrt(q))
-                _rbm_kernels.batch_accumulate(state[t.carrier], plan.cs, perm, p, b0, b1, phi,
-                                              outs[t.target], t.target not in cleared)
-                cleared.add(t.target)
+        # the last term of a source may overwrite the distances
+        for t, phi in _rbm_step.term_values(
+                plan, state, perm, b0, b1, qbuf[:m],
+                lambda i, q, last: q if last else pbuf[:m]):
+            _rbm_kernels.batch_accumulate(state[t.carrier], plan.cs, perm, p, b0, b1, phi,
+                                          outs[t.target], t.target not in cleared)
+            cleared.add(t.target)
