@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from scipy.spatial.distance import cdist
 
 import kinred.distance._sparse as S
+import kinred.distance._repair as RP
 from kinred.distance import w1
 from kinred.distance._costs import plan_cost
 from kinred.distance._repair import repair, tighten
@@ -144,12 +145,28 @@ def test_sorted_unique_is_numpy_unique(values):
     np.testing.assert_array_equal(S.sorted_unique(a), np.unique(a))
 
 
-def test_paired_clouds_close_in_one_solve():
+def test_paired_clouds_close_in_one_solve(monkeypatch):
     """Degenerate duals: paired atoms give a plan with n positive entries; without the repair
     the c-transform of POT's arbitrary dual left a gap and column generation drew another
-    arbitrary dual each round. With it, one solve is exact."""
+    arbitrary dual each round. With it, one solve is exact (the repair's allowance lifted:
+    on a loaded machine it could stop the repair, and the test is about what it computes)."""
+    monkeypatch.setattr(RP, "REPAIR_SECONDS", 600.0)
     X, a, Y, b = _problem(11, 20_000, 20_000, 4, True, spread=0.01)
     r = w1(X, Y, "sparse", a=a, b=b)
     assert r.exact
     assert r.info["iterations"] == 1
     assert r.lower == r.value == r.upper
+
+
+def test_a_repair_past_its_allowance_hands_over_to_column_generation(monkeypatch):
+    """With no allowance at all the repair stops at its first look at the clock: its partial
+    plan and the violators join the graph, the next solves close the gap, and the value is
+    POT's dense optimum (the repair's allowance only moves work between repair and solves)."""
+    monkeypatch.setattr(RP, "REPAIR_SECONDS", 0.0)
+    monkeypatch.setattr(RP, "REPAIR_ALLOWANCE", 0.0)
+    X, a, Y, b = _problem(12, 1500, 1500, 3, True, spread=0.05)
+    r = w1(X, Y, "sparse", a=a, b=b)
+    ref = float(ot.emd2(a, b, cdist(X, Y), numItermax=10**7))
+    assert r.lower <= ref * (1 + 1e-12) and r.upper >= ref * (1 - 1e-12)
+    assert r.exact and r.value == pytest.approx(ref, rel=1e-12)
+    assert r.info["iterations"] >= 2 and r.info["repair_work"] == 0  # stopped at once

@@ -31,6 +31,11 @@ __all__ = ["repair", "RepairOutcome"]
 #: Work budget of one repair (queue steps) per atom.
 WORK_PER_ATOM = 20
 
+#: The repair's allowance in one round of column generation: ``REPAIR_ALLOWANCE`` times the
+#: seconds of the round's certificate pass, plus ``REPAIR_SECONDS``.
+REPAIR_ALLOWANCE = 1.0
+REPAIR_SECONDS = 2.0
+
 #: Room for the edges that cycle cancelling adds, per atom.
 NEW_EDGES_PER_ATOM = 1.0
 
@@ -143,7 +148,7 @@ def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = No
     rows = np.empty(n, np.int64)
     Yc = np.ascontiguousarray(Y, dtype=np.float64)
     ne, status, work, cycles = pr.size, OUT_OF_WORK, 0, 0
-    chunk = max(10_000, (n + m) // 4)
+    chunk = 10_000                       # queue steps between looks at the clock
     while status == OUT_OF_WORK and work < budget:
         if deadline is not None and time.perf_counter() > deadline:
             break
@@ -153,11 +158,25 @@ def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = No
             slack, min(chunk, budget - work))
         work += w
         cycles += c
+        if status == OUT_OF_WORK and REFRESH_BOUNDS:
+            # u only went down: the nodes' bounds of u, computed again, prune more
+            umax = _node_umax(tree, us)
     keep = emass[:ne] > 0
     u_new = np.empty(n)
     u_new[tree.order] = us
     new_plan = (tree.order[erow[:ne][keep]], ecol[:ne][keep], emass[:ne][keep])
     return RepairOutcome(new_plan, u_new, v, int(status), int(work), int(cycles), t_search)
+
+
+REFRESH_BOUNDS = True
+
+
+def _node_umax(tree: CTree, us: np.ndarray) -> np.ndarray:
+    """The tree nodes' largest ``u`` (``us`` in the tree's row order)."""
+    out = np.empty(tree.lo.shape[0])
+    out[tree.first_leaf:] = np.maximum.reduceat(us, tree.starts[:-1])
+    tree._up(out, np.maximum)
+    return out
 
 
 def _link(erow, head, nxt, ne):
@@ -202,7 +221,7 @@ def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadl
     s = time.perf_counter()
     u, v = tighten(X, Y, u, v, plan, keys, 1e3 * noise + roundoff)
     tm["tighten"] = tm.get("tighten", 0.0) + time.perf_counter() - s
-    s = time.perf_counter()
+    s = t_certify = time.perf_counter()
     pr, pc, _ = plan
     f0, j0 = first_per(pr, n, pair_costs(X, Y, pr, pc) - v[pc], pc)
     open_f = np.zeros(n, np.int8)
@@ -218,7 +237,12 @@ def certify_repaired(X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadl
     if not bad.any() or n_open:
         return upper, lower, dual_scale(a, f, b, v), n_open, new, plan_noise(X, Y, u, v, plan)
     s = time.perf_counter()
-    r = repair(X, Y, u, v, plan, trees[0], roundoff, deadline=deadline,
+    # the repair is quick on an optimal plan and slow on one far from it (cycle cancelling:
+    # minutes at 10^5 atoms): it gets about the certificate's time, then column generation
+    # improves the plan and the next round's repair finishes
+    allowance = s + REPAIR_ALLOWANCE * (s - t_certify) + REPAIR_SECONDS
+    r = repair(X, Y, u, v, plan, trees[0], roundoff,
+               deadline=allowance if deadline is None else min(deadline, allowance),
                start=sorted_unique(jf[bad]))
     tm["repair"] = tm.get("repair", 0.0) + time.perf_counter() - s
     tm["repair_cycles"] = tm.get("repair_cycles", 0) + r.cycles

@@ -165,15 +165,15 @@ FORK_EDGES = 500_000
 
 #: The assignment solver's allowance, before the network simplex takes over:
 #: ``ASSIGN_SECONDS + ASSIGN_SECONDS_PER_EDGE·edges``. It runs only on graphs of
-#: :data:`FORK_EDGES` edges or more, always in a forked child that can be stopped: LAPJVsp is
-#: fast when the optimal plan stays near the identity pairing (10⁶ atoms, 10⁷ edges: 1.5 s;
-#: the network simplex: 38 s), slow when it moves atoms by more than their spacing (10⁵
-#: atoms of the delayed-curse scene: 44 s; the network simplex: 12 s), and scipy's
-#: implementation can loop forever on ties (seen on 100 atoms in R¹, cf. scipy gh-17269):
-#: the allowance, about a quarter of a network-simplex solve of that size, bounds what a
-#: wrong guess costs.
+#: :data:`FORK_EDGES` edges or more, always in a forked child that can be stopped. Warmed by
+#: the ε-scaling auction (:func:`kinred.distance._assign.warm_prices`), LAPJVsp finishes in
+#: about a second even when the optimal plan moves atoms by more than their spacing; the
+#: auction costs 0.1–5 µs per edge (10⁶ paired atoms near the identity: ~3 s; the
+#: delayed-curse scene's 1 075 200 atoms, 10⁷ edges: ~40 s, where the network simplex and a
+#: cold LAPJVsp take more than 270 s). scipy's implementation can loop forever on ties (seen
+#: on 100 atoms in R¹, cf. scipy gh-17269): the allowance bounds what a wrong guess costs.
 ASSIGN_SECONDS = 2.0
-ASSIGN_SECONDS_PER_EDGE = 1e-6
+ASSIGN_SECONDS_PER_EDGE = 6e-6
 
 
 class _SolveTimedOut(Exception):
