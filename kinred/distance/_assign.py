@@ -11,6 +11,12 @@ where the network simplex takes tens of seconds. The dual potentials, which LAPJ
 return, are the shortest-path distances of the residual graph
 (:func:`kinred.distance._assign_kernels.assignment_potentials`).
 
+Cold, LAPJVsp's augmenting paths grow long when the optimal permutation moves atoms by more
+than their spacing (minutes at 10⁶ atoms of the delayed-curse scene). So it is warmed by
+Bertsekas' ε-scaling auction (:func:`warm_prices`,
+:func:`kinred.distance._auction_kernels.auction`): LAPJVsp runs on the reduced costs
+``cᵢⱼ + pⱼ − hᵢ``, which have the same optimal permutations.
+
 scipy's LAPJVsp can loop forever on ties (seen on 100 atoms in R¹; scipy gh-17269 reports
 other infinite loops): :mod:`kinred.distance._sparse` calls it only on large graphs, in a forked
 child stopped after an allowance, and otherwise solves with the network simplex.

@@ -291,10 +291,13 @@ def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds):
     and the dual bound searched within another ``max_seconds``, which may prove the index
     coupling optimal) or of the general bracket (explicit couplings, projections, a
     sub-sampled dual)."""
-    head = (f"the time budget max_seconds = {max_seconds:g} ran out during network-simplex "
-            f"solve {it} (stopped; ")
+    head = (f"the time budget max_seconds = {max_seconds:g} ran out during solve {it} "
+            f"(stopped; ")
     if it > 1:
-        return lower, upper, head + "the bounds of the earlier solves)", False
+        # an early round's c-transform can be a poor (even negative) bound: the 1-D
+        # projections' bound costs O(N log N)
+        return (max(lower, _cheap_lower(X, a, Y, b, rng)), upper,
+                head + "the bounds of the earlier solves and of 1-D projections)", False)
     if paired:
         from ._paired import paired_w1_bracket
 
