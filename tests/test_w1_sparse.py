@@ -378,6 +378,27 @@ def test_a_later_solve_past_the_budget_keeps_the_better_of_dual_and_projections(
     assert 0.3 * exact < r.lower <= exact <= r.upper
 
 
+def test_a_first_solve_that_ends_past_the_budget_gets_the_paired_bracket_and_its_cost(
+        monkeypatch):
+    """Paired atoms whose first solve ends after ``max_seconds`` (the certificate has no time
+    left): the lower end is the paired bracket's (as for a stopped solve), the upper end the
+    solved plan's cost, below the index coupling's; flagged like a stopped first solve, so
+    that the kinetic comparison does not wait again at the later times."""
+    from kinred.distance import paired_w1_bracket
+
+    x, y = _paired(2000)
+    y = y + 0.05 * np.random.default_rng(3).standard_normal(y.shape)
+    exact = w1(x, y, "exact").value
+    monkeypatch.setattr(sparse_mod._Budget, "spent", lambda self: True)
+    r = w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=60.0)
+    pb = paired_w1_bracket(x, y, np.full(2000, 1 / 2000), seed=0)
+    assert r.info["first_solve_stopped"] and r.info["iterations"] == 1
+    assert "before its certificate" in r.note
+    assert r.lower <= exact * (1 + 1e-12) and r.upper >= exact * (1 - 1e-12)
+    assert r.upper < pb.upper * (1 - 1e-4)            # the solve's plan, not the pairing
+    assert r.upper == pytest.approx(exact, rel=1e-6)  # optimal on the 8-NN graph already
+
+
 def test_a_stopped_solve_on_paired_atoms_is_exact_when_the_dual_proves_the_pairing(
         monkeypatch):
     """Paired atoms whose index coupling is optimal (a translation smaller than the atoms'

@@ -284,7 +284,7 @@ def _cheap_lower(X, a, Y, b, rng) -> float:
     return projection_lower(Pts(X, a), Pts(Y, b), rng, n_projections=8, n_refine=5)[0]
 
 
-def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds):
+def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds, after=False):
     """``(lower, upper, reason, exact)`` when the budget ran out during solve ``it``: the
     bounds of the earlier solves, or (first solve) those of
     :func:`kinred.distance.paired_w1_bracket` (paired atoms: index coupling, 1-D projections
@@ -292,7 +292,9 @@ def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds):
     coupling optimal) or of the general bracket (explicit couplings, projections, a
     sub-sampled dual)."""
     head = (f"the time budget max_seconds = {max_seconds:g} ran out during solve {it} "
-            f"(stopped; ")
+            f"(stopped; " if not after else
+            f"the time budget max_seconds = {max_seconds:g} ran out with solve {it}, before "
+            f"its certificate (upper: its plan's cost; lower: ")
     if it > 1:
         # an early round's c-transform can be a poor (even negative) bound: the 1-D
         # projections' bound costs O(N log N)
@@ -398,6 +400,14 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
             stopped_first = it == 1
             break
         tm["solve"] += time.perf_counter() - s
+        if it == 1 and paired and budget.spent():
+            # no time left for the certificate: the paired bracket's dual bound (what a
+            # stopped first solve gets), with the solved plan's cost as the upper end
+            lower, up2, reason, exact = _timed_out(X, a, Y, b, paired, rng, lower, upper, it,
+                                                   max_seconds, after=True)
+            upper = min(up, up2)
+            stopped_first = True
+            break
         s = time.perf_counter()
         upper = min(upper, up)
         roundoff = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v))))
@@ -467,6 +477,10 @@ class _Budget:
     @property
     def deadline(self):
         return None if self.max_seconds is None else self.t0 + self.max_seconds
+
+    def spent(self) -> bool:
+        """Whether the time budget is spent."""
+        return self.deadline is not None and time.perf_counter() >= self.deadline
 
     def stop_reason(self, size: int, merged: int, it: int, n_open: int, dims) -> str:
         """Why the next round does not run ("" when it does)."""
