@@ -122,3 +122,12 @@ def test_warm_and_cold_solves_are_both_optimal_with_tight_feasible_potentials(
         assert np.min(w - u[r] - v[c]) >= -slack
         tight = np.array([cost_of[(i, j)] for i, j in zip(pr.tolist(), pc.tolist())])
         assert np.max(np.abs(tight - u[pr] - v[pc])) <= slack
+
+
+def test_no_prices_without_a_perfect_matching():
+    """A row without edges is refused before the auction; rows competing for one column bid
+    until the budget (a price war: no perfect matching) and give no prices either."""
+    lonely = csr_array((np.array([1.0]), (np.array([0]), np.array([0]))), shape=(2, 2))
+    assert A.warm_prices(lonely) is None
+    war = csr_array((np.array([1.0, 2.0]), (np.array([0, 1]), np.array([0, 0]))), shape=(2, 2))
+    assert A.warm_prices(war) is None

@@ -77,11 +77,12 @@ def warm_prices(G):
     """Column prices ``p`` of the assignment problem on the CSR graph ``G`` by the ε-scaling
     auction (:func:`kinred.distance._auction_kernels.auction`), ε from
     :data:`AUCTION_EPS_START` to :data:`AUCTION_EPS_END` times the mean edge cost, or ``None``
-    when it spends :data:`AUCTION_BIDS_PER_EDGE` bids per edge (or the graph has no edge)."""
+    when it spends :data:`AUCTION_BIDS_PER_EDGE` bids per edge (no perfect matching makes it
+    bid until then) or a row has no edge."""
     from ._auction_kernels import auction
 
     n = G.shape[0]
-    if G.data.size == 0:
+    if G.data.size == 0 or np.any(np.diff(G.indptr) == 0):   # a row without edges: no matching
         return None
     unit = float(G.data.mean())
     if not unit > 0:
