@@ -399,6 +399,36 @@ def test_a_first_solve_that_ends_past_the_budget_gets_the_paired_bracket_and_its
     assert r.upper == pytest.approx(exact, rel=1e-6)  # optimal on the 8-NN graph already
 
 
+def test_a_first_certificate_that_ends_past_the_budget_gets_the_paired_bracket(monkeypatch):
+    """The budget runs out during round 1's certificate (here: a poor certificate, then the
+    clock): no 1-D projections, no round 2 -- the paired bracket's dual bound met with the
+    round's bounds, flagged as stopped."""
+    from kinred.distance import paired_w1_bracket
+
+    x, y = _paired(2000)
+    y = y + 0.05 * np.random.default_rng(4).standard_normal(y.shape)
+    exact = w1(x, y, "exact").value
+    clock = []
+
+    def spent(self):
+        clock.append(1)
+        return len(clock) > 1      # time left after the solve, none after the certificate
+
+    def poor_certificate(X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadline, tm,
+                         violators):
+        return sparse_mod.plan_cost(X, Y, plan), -1.0, 1.0, 0, np.array([0], np.int64), noise
+
+    monkeypatch.setattr(sparse_mod._Budget, "spent", spent)
+    monkeypatch.setattr(sparse_mod, "certify_repaired", poor_certificate)
+    monkeypatch.setattr(sparse_mod, "_cheap_lower", lambda *a: pytest.fail("projections run"))
+    r = w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=60.0)
+    pb = paired_w1_bracket(x, y, np.full(2000, 1 / 2000), seed=0, dual_seconds=60.0)
+    assert r.info["first_solve_stopped"] and r.info["iterations"] == 1
+    assert "during solve 1's certificate" in r.note
+    assert r.lower >= pb.lower * (1 - 1e-9) and r.lower <= exact * (1 + 1e-12)
+    assert exact * (1 - 1e-12) <= r.upper < pb.upper
+
+
 def test_a_stopped_solve_on_paired_atoms_is_exact_when_the_dual_proves_the_pairing(
         monkeypatch):
     """Paired atoms whose index coupling is optimal (a translation smaller than the atoms'

@@ -284,7 +284,16 @@ def _cheap_lower(X, a, Y, b, rng) -> float:
     return projection_lower(Pts(X, a), Pts(Y, b), rng, n_projections=8, n_refine=5)[0]
 
 
-def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds, after=False):
+def _paired_late(X, a, Y, b, rng, lower, upper, max_seconds, when: str):
+    """Paired atoms whose first round ran out of time after its solve: the paired bracket
+    (:func:`_timed_out`) met with the bounds already proved (``lower``, the plan's cost
+    ``upper``). Returns ``(lower, upper, reason, exact)``."""
+    lo, up, reason, exact = _timed_out(X, a, Y, b, True, rng, lower, upper, 1, max_seconds,
+                                       after=when)
+    return max(lo, lower), min(up, upper), reason, exact
+
+
+def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds, after: str = ""):
     """``(lower, upper, reason, exact)`` when the budget ran out during solve ``it``: the
     bounds of the earlier solves, or (first solve) those of
     :func:`kinred.distance.paired_w1_bracket` (paired atoms: index coupling, 1-D projections
@@ -293,8 +302,8 @@ def _timed_out(X, a, Y, b, paired, rng, lower, upper, it, max_seconds, after=Fal
     sub-sampled dual)."""
     head = (f"the time budget max_seconds = {max_seconds:g} ran out during solve {it} "
             f"(stopped; " if not after else
-            f"the time budget max_seconds = {max_seconds:g} ran out with solve {it}, before "
-            f"its certificate (upper: its plan's cost; lower: ")
+            f"the time budget max_seconds = {max_seconds:g} ran out {after} (upper: the "
+            f"solved plan's cost; lower: ")
     if it > 1:
         # an early round's c-transform can be a poor (even negative) bound: the 1-D
         # projections' bound costs O(N log N)
@@ -400,12 +409,14 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
             stopped_first = it == 1
             break
         tm["solve"] += time.perf_counter() - s
-        if it == 1 and paired and budget.spent():
-            # no time left for the certificate: the paired bracket's dual bound (what a
-            # stopped first solve gets), with the solved plan's cost as the upper end
-            lower, up2, reason, exact = _timed_out(X, a, Y, b, paired, rng, lower, upper, it,
-                                                   max_seconds, after=True)
-            upper = min(up, up2)
+        # paired atoms, first solve, budget spent: the paired bracket's dual bound (what a
+        # stopped first solve gets) with the plan's cost as upper end, flagged as stopped so
+        # that the kinetic comparison's later times do not wait again
+        late = it == 1 and paired and max_seconds is not None
+        if late and budget.spent():
+            lower, upper, reason, exact = _paired_late(X, a, Y, b, rng, lower, min(upper, up),
+                                                       max_seconds, "with solve 1, before its "
+                                                       "certificate")
             stopped_first = True
             break
         s = time.perf_counter()
@@ -424,18 +435,31 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                 tm["certify"] += time.perf_counter() - s
         except OutOfTime:
             tm["certify"] += time.perf_counter() - s
+            if late:
+                lower, upper, reason, exact = _paired_late(X, a, Y, b, rng, lower, upper,
+                                                           max_seconds, "during solve 1's "
+                                                           "certificate")
+                stopped_first = True
+                break
             lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
             reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
                       "certificate (lower bound: the best of the c-transform of an earlier solve"
                       " and 1-D projections)")
             break
-        if n_open:
+        late = late and budget.spent()
+        if n_open and not late:
             lo = max(lo, _cheap_lower(X, a, Y, b, rng))
         lower = max(lower, lo)
         tol = ((rtol if rtol is not None else DEFAULT_RTOL) * upper + 16 * _EPS * scale
                + min(4 * noise, MAX_NOISE_RTOL * upper))
         if upper - lower <= tol:
             exact = True
+            break
+        if late:
+            lower, upper, reason, exact = _paired_late(X, a, Y, b, rng, lower, upper,
+                                                       max_seconds, "during solve 1's "
+                                                       "certificate")
+            stopped_first = True
             break
         merged = sorted_unique(np.concatenate([keys, new]))
         reason = budget.stop_reason(keys.size, merged.size, it, n_open, (n, m, d, k))
