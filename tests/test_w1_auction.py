@@ -91,9 +91,10 @@ def test_the_bid_budget_stops_the_auction_and_the_cold_solver_answers(monkeypatc
     assert status == 1 and bids == 500 and np.sum(sigma >= 0) < 400
     monkeypatch.setattr(A, "AUCTION_BIDS_PER_EDGE", 0)
     assert A.warm_prices(G) is None
-    cold = A.solve_assignment(np.full(400, 1 / 400), r, c, w, 400, warm=False)
-    stopped = A.solve_assignment(np.full(400, 1 / 400), r, c, w, 400)
-    assert np.array_equal(cold[0], stopped[0]) and np.array_equal(cold[1], stopped[1])
+    pr, pc, pm, u, v = A.solve_assignment(np.full(400, 1 / 400), r, c, w, 400)
+    assert np.array_equal(np.sort(pr), np.arange(400))
+    assert np.array_equal(np.sort(pc), np.arange(400))
+    assert float(G[pr, pc].sum()) == pytest.approx(_graph_optimum(G, 400), rel=1e-12)
 
 
 @settings(max_examples=20, deadline=None)

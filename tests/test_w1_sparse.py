@@ -399,10 +399,14 @@ def test_a_first_solve_that_ends_past_the_budget_gets_the_paired_bracket_and_its
     assert r.upper == pytest.approx(exact, rel=1e-6)  # optimal on the 8-NN graph already
 
 
-def test_a_first_certificate_that_ends_past_the_budget_gets_the_paired_bracket(monkeypatch):
-    """The budget runs out during round 1's certificate (here: a poor certificate, then the
-    clock): no 1-D projections, no round 2 -- the paired bracket's dual bound met with the
-    round's bounds, flagged as stopped."""
+@pytest.mark.parametrize("cut", [False, True])
+def test_a_first_certificate_that_ends_past_the_budget_gets_the_paired_bracket(monkeypatch,
+                                                                               cut):
+    """The budget runs out during round 1's certificate (a poor certificate, then the clock;
+    or a search cut short, ``OutOfTime``): no 1-D projections, no round 2 -- the paired
+    bracket's dual bound met with the round's bounds, flagged as stopped."""
+    from kinred.distance._search import OutOfTime
+
     from kinred.distance import paired_w1_bracket
 
     x, y = _paired(2000)
@@ -416,6 +420,8 @@ def test_a_first_certificate_that_ends_past_the_budget_gets_the_paired_bracket(m
 
     def poor_certificate(X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadline, tm,
                          violators):
+        if cut:
+            raise OutOfTime
         return sparse_mod.plan_cost(X, Y, plan), -1.0, 1.0, 0, np.array([0], np.int64), noise
 
     monkeypatch.setattr(sparse_mod._Budget, "spent", spent)

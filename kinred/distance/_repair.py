@@ -158,25 +158,14 @@ def repair(X, Y, u, v, plan, tree: CTree, tiny: float, max_work: int | None = No
             slack, min(chunk, budget - work))
         work += w
         cycles += c
-        if status == OUT_OF_WORK and REFRESH_BOUNDS:
+        if status == OUT_OF_WORK:
             # u only went down: the nodes' bounds of u, computed again, prune more
-            umax = _node_umax(tree, us)
+            umax = tree.node_vmax(us, ordered=True)
     keep = emass[:ne] > 0
     u_new = np.empty(n)
     u_new[tree.order] = us
     new_plan = (tree.order[erow[:ne][keep]], ecol[:ne][keep], emass[:ne][keep])
     return RepairOutcome(new_plan, u_new, v, int(status), int(work), int(cycles), t_search)
-
-
-REFRESH_BOUNDS = True
-
-
-def _node_umax(tree: CTree, us: np.ndarray) -> np.ndarray:
-    """The tree nodes' largest ``u`` (``us`` in the tree's row order)."""
-    out = np.empty(tree.lo.shape[0])
-    out[tree.first_leaf:] = np.maximum.reduceat(us, tree.starts[:-1])
-    tree._up(out, np.maximum)
-    return out
 
 
 def _link(erow, head, nxt, ne):

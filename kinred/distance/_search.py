@@ -91,8 +91,10 @@ class CTree:
             arr[parent:first] = op(arr[first:2 * first + 1:2], arr[first + 1:2 * first + 2:2])
             first = parent
 
-    def node_vmax(self, v: np.ndarray) -> np.ndarray:
-        vs = v[self.order]
+    def node_vmax(self, v: np.ndarray, ordered: bool = False) -> np.ndarray:
+        """Each node's largest ``v`` over its points (``v`` in the points' order, or with
+        ``ordered`` already in the tree's order)."""
+        vs = v if ordered else v[self.order]
         out = np.empty(self.lo.shape[0])
         out[self.first_leaf:] = np.maximum.reduceat(vs, self.starts[:-1])
         self._up(out, np.maximum)

@@ -435,17 +435,14 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                 tm["certify"] += time.perf_counter() - s
         except OutOfTime:
             tm["certify"] += time.perf_counter() - s
-            if late:
-                lower, upper, reason, exact = _paired_late(X, a, Y, b, rng, lower, upper,
-                                                           max_seconds, "during solve 1's "
-                                                           "certificate")
-                stopped_first = True
+            if not late:
+                lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
+                reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
+                          "certificate (lower bound: the best of the c-transform of an earlier "
+                          "solve and 1-D projections)")
                 break
-            lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
-            reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
-                      "certificate (lower bound: the best of the c-transform of an earlier solve"
-                      " and 1-D projections)")
-            break
+            # a search cut short by the deadline: the paired bracket below gives the lower end
+            lo, scale, n_open, new = -math.inf, upper, 0, keys[:0]
         late = late and budget.spent()
         if n_open and not late:
             lo = max(lo, _cheap_lower(X, a, Y, b, rng))
