@@ -147,8 +147,8 @@ def test_candidate_keys_are_deduplicated():
     rng = np.random.default_rng(5)
     x = rng.normal(size=(400, 3))
     y = x.copy()                                         # identity + kNN list (i, i) twice
-    keys = sparse_mod._initial_keys(x, np.full(400, 1 / 400), y, np.full(400, 1 / 400), 4, True,
-                                    rng)
+    keys, _ = sparse_mod._initial_keys(x, np.full(400, 1 / 400), y, np.full(400, 1 / 400), 4,
+                                       True, rng)
     assert np.unique(keys).size == keys.size and np.all(np.diff(keys) > 0)
     r = w1(x, y + 0.01, "sparse")
     assert r.exact and r.value == pytest.approx(0.01 * np.sqrt(3), rel=1e-12)

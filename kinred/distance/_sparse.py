@@ -48,6 +48,7 @@ from .._validate import check_alloc
 from ..errors import NotConverged
 from ._assign import ASSIGNMENT, is_assignment, load_kernels, solve_assignment
 from ._bracket import _principal_axis
+from ._costscale import PRUNE_EDGES, prune
 from ._inputs import Pts
 from ._oned import monotone_pieces
 from ._repair import certify_repaired
@@ -115,10 +116,13 @@ def _coupling_edges(X, a, Y, b, paired: bool, rng):
     return i.astype(np.int64), j.astype(np.int64), mass
 
 
-def _initial_keys(X, a, Y, b, k: int, paired: bool, rng) -> np.ndarray:
+def _initial_keys(X, a, Y, b, k: int, paired: bool, rng):
+    """The candidate graph's keys ``i·m + j`` (sorted, unique) and those of its coupling of the
+    full measures (all pairs when there are few)."""
     n, m = X.shape[0], Y.shape[0]
     if n * m <= _ALL_PAIRS:
-        return np.arange(n * m, dtype=np.int64)
+        every = np.arange(n * m, dtype=np.int64)
+        return every, every
     ci, cj, _ = _coupling_edges(X, a, Y, b, paired, rng)
     parts = [ci * m + cj]
     nx = knn(X, Y, k)
@@ -127,7 +131,8 @@ def _initial_keys(X, a, Y, b, k: int, paired: bool, rng) -> np.ndarray:
     ny = knn(Y, X, k)
     parts.append(ny.ravel() * m + np.repeat(np.arange(m, dtype=np.int64), ny.shape[1]))
     del ny
-    return sorted_unique(np.concatenate(parts))  # deduplicated: COO -> CSR sums repeats
+    # deduplicated: COO -> CSR sums repeats
+    return sorted_unique(np.concatenate(parts)), parts[0]
 
 
 def _solve(a, b, rows, cols, costs, n, m, num_iter_max, assignment=False):
@@ -389,9 +394,16 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                      else int(max_edges), max_seconds, max_bytes, t0)
     price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
     tm = {}
-    keys = _initial_keys(X, a, Y, b, k, paired, rng)
+    keys, coupling = _initial_keys(X, a, Y, b, k, paired, rng)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
     tm["graph"] = time.perf_counter() - t0
+    pool = None          # pruned: the unpruned candidate graph, with the violators found
+    if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
+        s = time.perf_counter()
+        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline)
+        if pruned is not None:
+            pool, keys = keys, pruned
+        tm["prices"] = time.perf_counter() - s
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
     stopped_first = False
@@ -462,6 +474,16 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         reason = budget.stop_reason(keys.size, merged.size, it, n_open, (n, m, d, k))
         if reason:
             break
+        if pool is not None:
+            # the violators join the pool; the next solve runs on the pool's edges of small
+            # reduced cost under prices warmed from this solve's duals, and the violators
+            s = time.perf_counter()
+            grown = sorted_unique(np.concatenate([pool, new]))
+            kept = [plan[0] * m + plan[1]] + ([new] if grown.size == pool.size else [])
+            pool, kept = grown, np.concatenate(kept)
+            pruned = prune(X, a, Y, b, pool, kept, budget.deadline, start=(u, v))
+            merged = merged if pruned is None else pruned
+            tm["prices"] += time.perf_counter() - s
         keys = merged
     if not exact:
         pad = 8 * _EPS * (upper + scale)

@@ -1,0 +1,122 @@
+"""The cost scaling that prunes the candidate graph of weighted problems in w1(method="sparse")
+(kinred.distance._costscale_kernels, kinred.distance._costscale).
+
+Checked against independent computations: POT's dense network simplex for the optimum (an
+ε-optimal flow costs at most (n + m)·ε more, Goldberg–Tarjan), the ε-optimality conditions
+recomputed from the returned prices and flow, the plain-Python twin for the discharges, and
+w1's exact value against POT dense when the pruned graph is used."""
+
+import numpy as np
+import ot
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import kinred.distance._costscale as CS
+import kinred.distance._sparse as S
+from kinred.distance import w1
+from kinred.distance._costscale_kernels import transport_prices, transport_prices_numpy
+
+
+def _problem(seed, n, m, d, shift, zero_mass_gap=False):
+    rng = np.random.default_rng(seed)
+    X = rng.standard_normal((n, d)) + shift
+    Y = rng.standard_normal((m, d)) * 0.7 + shift + 0.3
+    a, b = rng.random(n) + 0.05, rng.random(m) + 0.05
+    return X, a / a.sum(), Y, b / b.sum()
+
+
+def _dense_args(X, a, Y, b, eps_end_rel, theta=6.0):
+    n, m = X.shape[0], Y.shape[0]
+    C = ot.dist(X, Y, metric="euclidean")
+    rows, cols = np.divmod(np.arange(n * m, dtype=np.int64), m)
+    cost = C.ravel().copy()
+    indptr = np.arange(0, n * m + 1, m, dtype=np.int64)
+    colidx = np.argsort(cols, kind="stable").astype(np.int64)
+    colptr = np.searchsorted(cols[colidx], np.arange(m + 1)).astype(np.int64)
+    unit = cost.mean()
+    tol = 1e-12 * max(a.max(), b.max()) + 2 * abs(a.sum() - b.sum())
+    args = (indptr, cols, cost, colptr, colidx, rows, a, b, np.zeros(n), np.zeros(m),
+            0.5 * unit, eps_end_rel * unit, theta, tol, 10**8, np.zeros(0, np.int64))
+    return args, C, rows, cols, cost, eps_end_rel * unit, tol
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10**6), n=st.integers(1, 40), m=st.integers(1, 40),
+       d=st.integers(1, 4), shift=st.sampled_from([0.0, -3.0, 1e4]),
+       eps=st.sampled_from([1e-2, 1e-5]))
+def test_flow_is_eps_optimal_and_within_its_bound_of_the_optimum(seed, n, m, d, shift, eps):
+    X, a, Y, b = _problem(seed, n, m, d, shift)
+    args, C, rows, cols, cost, eps_abs, tol = _dense_args(X, a, Y, b, eps)
+    f, status, work = transport_prices(*args)
+    px, py = args[8], args[9]
+    assert status == 0 and work > 0
+    # marginals within the balance tolerance
+    assert np.abs(np.bincount(rows, f, n) - a).max() <= (n + m) * tol + 1e-15
+    assert np.abs(np.bincount(cols, f, m) - b).max() <= (n + m) * tol + 1e-15
+    r = cost + px[rows] - py[cols]
+    slack = 1e-9 * (1 + np.abs(px).max() + np.abs(py).max())
+    assert r.min() >= -eps_abs - slack                       # every edge
+    assert r[f > 0].max() <= eps_abs + slack                 # edges with flow
+    opt = ot.emd2(a, b, C)
+    assert f @ cost >= opt - 1e-12 * max(opt, 1e-300) - (n + m) * tol * C.max()
+    assert f @ cost <= opt + (n + m) * eps_abs + (n + m) * tol * C.max() + 1e-12
+
+
+def test_kernel_equals_its_python_twin():
+    X, a, Y, b = _problem(3, 12, 9, 2, 0.0)
+    args, *_ = _dense_args(X, a, Y, b, 1e-3)
+    twin = tuple(x.copy() if isinstance(x, np.ndarray) else x for x in args)
+    f1, s1, w1_ = transport_prices(*args)
+    f2, s2, w2 = transport_prices_numpy(*twin)
+    assert (s1, w1_) == (s2, w2)
+    assert np.array_equal(f1, f2) and np.array_equal(args[8], twin[8])
+    assert np.array_equal(args[9], twin[9])
+
+
+def test_work_budget_stops_it():
+    X, a, Y, b = _problem(4, 30, 25, 2, 0.0)
+    args, *_ = _dense_args(X, a, Y, b, 1e-6)
+    args = args[:14] + (5,) + args[15:]
+    _, status, work = transport_prices(*args)
+    assert status == 1 and work == 6
+
+
+def test_imbalance_above_the_tolerance_does_not_loop_for_ever():
+    """The tolerance must exceed |Σa − Σb|: with it, a balanced problem ends."""
+    X, a, Y, b = _problem(5, 20, 20, 2, 0.0)
+    b = b * (1 + 1e-15)
+    args, *_ = _dense_args(X, a, Y, b, 1e-6)
+    _, status, _ = transport_prices(*args)
+    assert status == 0
+
+
+@pytest.mark.parametrize("d,seed", [(2, 0), (3, 1), (6, 2)])
+def test_pruned_graph_gives_the_dense_optimum(monkeypatch, d, seed):
+    """Weighted, unequal sizes, pruned from the first solve on (PRUNE_EDGES lowered): exact and
+    equal to POT dense; the pruned graph is smaller than the k-NN graph."""
+    monkeypatch.setattr(S, "PRUNE_EDGES", 0)
+    calls = []
+    orig = CS.prune
+
+    def spy(X, a, Y, b, keys, kept, deadline=None, start=None):
+        out = orig(X, a, Y, b, keys, kept, deadline, start)
+        calls.append((keys.size, None if out is None else out.size))
+        return out
+
+    monkeypatch.setattr(S, "prune", spy)
+    X, a, Y, b = _problem(seed, 300, 240, d, 0.0)
+    r = w1(X, Y, "sparse", a=a, b=b)
+    dense = ot.emd2(a, b, ot.dist(X, Y, metric="euclidean"))
+    assert r.exact and r.value == pytest.approx(dense, rel=1e-12)
+    assert calls and calls[0][1] is not None and calls[0][1] < calls[0][0]
+    assert r.info["seconds_prices"] >= 0.0
+
+
+def test_pruning_within_a_time_budget_gives_the_dense_optimum(monkeypatch):
+    """The forked path (a deadline set) gives the same exact value."""
+    monkeypatch.setattr(S, "PRUNE_EDGES", 0)
+    X, a, Y, b = _problem(7, 250, 200, 3, 5.0)
+    r = w1(X, Y, "sparse", a=a, b=b, max_seconds=120.0)
+    dense = ot.emd2(a, b, ot.dist(X, Y, metric="euclidean"))
+    assert r.exact and r.value == pytest.approx(dense, rel=1e-12)
