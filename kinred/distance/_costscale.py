@@ -41,11 +41,13 @@ KEEP_EPS = 16.0
 WORK_PER_NODE = 4000
 
 
-def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, start=None):
+def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, start=None,
+          run_until=None):
     """The edges of ``keys`` (``i·m + j``) worth solving on, or ``None`` (no prices: a node
     without edges, the work budget spent, the deadline passed). ``coupling``: keys always
     kept (one coupling of the full measures at least). ``start``: duals ``(u, v)`` to start
-    the prices from (``px = −u``, ``py = v``; default zero)."""
+    the prices from (``px = −u``, ``py = v``; default zero). ``run_until(fn, deadline)``: runs
+    ``fn`` stopped at ``deadline`` (``None`` when stopped); used when ``deadline`` is set."""
     n, m = X.shape[0], Y.shape[0]
     rows, cols = np.divmod(keys, m)
     if np.unique(rows).size < n or np.unique(cols).size < m:
@@ -54,7 +56,7 @@ def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, sta
     unit = float(cost.mean())
     if not unit > 0:
         return None
-    out = _prices(rows, cols, cost, a, b, n, m, unit, deadline, start)
+    out = _prices(rows, cols, cost, a, b, n, m, unit, deadline, start, run_until)
     if out is None:
         return None
     px, py, f = out
@@ -63,7 +65,7 @@ def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, sta
     return sorted_unique(np.concatenate([keys[keep], coupling]))
 
 
-def _prices(rows, cols, cost, a, b, n, m, unit, deadline, start):
+def _prices(rows, cols, cost, a, b, n, m, unit, deadline, start, run_until):
     """``(px, py, flow)`` of the cost scaling, or ``None``; in a forked child stopped at
     ``deadline`` when one is set (the kernel cannot be interrupted)."""
     from ._costscale_kernels import transport_prices
@@ -82,15 +84,10 @@ def _prices(rows, cols, cost, a, b, n, m, unit, deadline, start):
                                         np.zeros(0, np.int64))
         return (px, py, f) if status == 0 else None
 
-    if deadline is None:
+    if deadline is None or run_until is None:
         return run()
-    from ._sparse import _in_child, _SolveTimedOut
-
     _load(transport_prices)           # compiled (or loaded) here, not in every child
-    try:
-        return _in_child(run, deadline)
-    except _SolveTimedOut:
-        return None
+    return run_until(run, deadline)
 
 
 def _load(kernel) -> None:

@@ -254,6 +254,14 @@ def _in_child(fn, deadline):
     return out
 
 
+def _child_or_none(fn, deadline):
+    """``fn()`` in a forked child stopped at ``deadline``, or ``None`` if stopped."""
+    try:
+        return _in_child(fn, deadline)
+    except _SolveTimedOut:
+        return None
+
+
 def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None):
     """Exact c-transforms ``f = v^c`` (over all ``j``) and ``g = f^c`` (over all ``i``), the
     lower bound ``Σ a f + Σ b g`` (exact summation), the size of that sum, the number of rows
@@ -400,7 +408,7 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     pool = None          # pruned: the unpruned candidate graph, with the violators found
     if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
         s = time.perf_counter()
-        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline)
+        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline, run_until=_child_or_none)
         if pruned is not None:
             pool, keys = keys, pruned
         tm["prices"] = time.perf_counter() - s
@@ -481,7 +489,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
             grown = sorted_unique(np.concatenate([pool, new]))
             kept = [plan[0] * m + plan[1]] + ([new] if grown.size == pool.size else [])
             pool, kept = grown, np.concatenate(kept)
-            pruned = prune(X, a, Y, b, pool, kept, budget.deadline, start=(u, v))
+            pruned = prune(X, a, Y, b, pool, kept, budget.deadline, start=(u, v),
+                           run_until=_child_or_none)
             merged = merged if pruned is None else pruned
             tm["prices"] += time.perf_counter() - s
         keys = merged
