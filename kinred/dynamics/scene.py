@@ -204,16 +204,18 @@ class Scene:
                     self._plans[key] = plan
         return plan
 
-    def _check_state(self, x, v, names=("x", "v")):
-        """The validated state; ``names`` name the arguments in messages (``x0, v0``)."""
+    def _check_state(self, x, v, names=("x", "v"), finite=True):
+        """The validated state; ``names`` name the arguments in messages (``x0, v0``).
+        ``finite=False`` leaves the NaN/Inf test to the caller (``simulate`` takes it from the
+        sums of its first compiled pass over the state, see ``kinred.integrate._simulate``)."""
         nx, nv = names
-        x = as_array(x, nx, ndim=2)
+        x = as_array(x, nx, ndim=2, finite=finite)
         if x.shape[0] < 1 or x.shape[1] < 1:
             raise InvalidInput(f"{nx} must have at least one agent and one dimension, got {x.shape}")
         if self.order == 2:
             if v is None:
                 raise InvalidInput(f"{nv} must be given for a second-order scene (order 2)")
-            v = as_array(v, nv, ndim=2)
+            v = as_array(v, nv, ndim=2, finite=finite)
             if v.shape != x.shape:
                 raise InvalidInput(f"{nv} must have the shape of {nx}, {x.shape}, got {v.shape}")
         elif v is not None:

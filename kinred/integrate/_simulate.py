@@ -17,7 +17,7 @@ import numpy as np
 
 from .._repr import brief, result_repr, sample_rows, table
 from .._rng import as_generator
-from .._validate import _short, as_float, as_int, as_span
+from .._validate import _short, as_array, as_float, as_int, as_span
 from ..dynamics import Scene
 from ..errors import InvalidInput
 from ._controllers import AdaptiveStep, ConstantStep
@@ -374,12 +374,23 @@ def _controller(given, spec, rtol, atol, max_steps):
     return given
 
 
+def _check_finite(scene, x0, v0, x_moments, v_moments) -> None:
+    """The NaN/Inf test of ``x0`` and ``v0`` (their shapes were validated): the plain sum
+    ``T`` of the moments that the working frame's compiled pass gave (non-finite iff an entry
+    is, or the sum overflows) clears an array without a pass of its own; an array without
+    them, or with a non-finite sum, is tested entry by entry (the error names the entry)."""
+    sums = (x_moments, None if v_moments is None else v_moments[0])
+    for z, m, name in zip((x0, v0), sums, ("x0", "v0")):
+        if z is not None and not (m is not None and np.isfinite(m[2])):
+            as_array(z, name)
+
+
 def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_steps,
              observers, stepsize_controller=None) -> _Run:
     """Validate the arguments of :func:`simulate` (before any allocation) and build the run."""
     if not isinstance(scene, Scene):
         raise InvalidInput(f"scene must be a kinred.dynamics.Scene, got {type(scene).__name__}")
-    x0, v0 = scene._check_state(x0, v0, ("x0", "v0"))
+    x0, v0 = scene._check_state(x0, v0, ("x0", "v0"), finite=False)
     t0, t1 = as_span(t_span)
     dt = as_float(dt, "dt", low=0.0, low_open=True)
     if not (t1 - t0) / dt <= 2.0**53:  # beyond it t0 + n·dt is no grid (and may be inf)
@@ -408,7 +419,8 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     grid = save_grid(save, t0, t1, dt, n_steps, method)
     observers = as_observers(observers, method)
 
-    x, v, shift, (x_moments, v_moments) = frame_of(scene, x0, v0, w)   # x0, v0 validated
+    x, v, shift, (x_moments, v_moments) = frame_of(scene, x0, v0, w)
+    _check_finite(scene, x0, v0, x_moments, v_moments)
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
                             x0, v0, w, v_moments)
