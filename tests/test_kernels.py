@@ -203,9 +203,13 @@ def test_morse_value_sq_allocates_nothing_per_block():
     q = np.random.default_rng(0).uniform(0.0, 100.0, (200, 1000))
     out = np.empty_like(q)
     m.value_sq(q, out)                          # the thread's scratch is made here
+    narrower = [(np.ascontiguousarray(q[:, :c]), np.empty((200, c)))
+                for c in (999, 990, 500, 1)]     # the dense strips' blocks narrow
     tracemalloc.start()
     try:
         m.value_sq(q, out)
+        for qc, oc in narrower:
+            m.value_sq(qc, oc)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

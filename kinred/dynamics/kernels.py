@@ -244,15 +244,23 @@ EXP_FLOOR = -600.0
 
 
 def _scratch(shape: tuple, dtype) -> tuple:
-    """Two arrays of ``shape`` and ``dtype`` kept per thread (reused by every call of that
-    shape and dtype; a different one replaces them): the working arrays of the in-place
-    kernel evaluations, which allocate nothing per call."""
-    key = (tuple(shape), np.dtype(dtype))
+    """Two arrays of ``shape`` and ``dtype``: views of two flat buffers kept per thread and
+    grown to the largest size asked (the dense strips' blocks change shape at every call),
+    for the in-place kernel evaluations, which then allocate nothing per call. Above
+    :data:`SCRATCH_MAX` entries fresh arrays (numpy maps those in huge pages)."""
+    size = math.prod(shape)
+    dtype = np.dtype(dtype)
+    if size > SCRATCH_MAX:
+        return np.empty(shape, dtype), np.empty(shape, dtype)
     got = getattr(_SCRATCH, "bufs", None)
-    if got is None or got[0] != key:
-        got = (key, np.empty(shape, dtype), np.empty(shape, dtype))
+    if got is None or got[0].dtype != dtype or got[0].size < size:
+        got = (np.empty(size, dtype), np.empty(size, dtype))
         _SCRATCH.bufs = got
-    return got[1], got[2]
+    return got[0][:size].reshape(shape), got[1][:size].reshape(shape)
+
+
+#: The largest scratch (entries per array) kept per thread: 8 MB in float64.
+SCRATCH_MAX = 2 ** 20
 
 
 class Morse:
