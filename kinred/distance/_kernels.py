@@ -32,6 +32,16 @@ r1, max_leaves, open_rows, thr, cand)``
 
 Its plain-numpy twin is :func:`ctransform_numpy` (the same minimum by brute force, in
 blocks; tests compare the two at 1e-12 relative).
+
+``smallest_k(D, k, out)``
+    ``out[r]`` = the columns of the ``k`` smallest entries of row ``r`` of ``D`` in ascending
+    order of value (ties: the lower column first) – the selection of the blocked searches in
+    high dimension (the ``k`` nearest neighbours, the c-transform's violators). One
+    comparison per entry against the row's current ``k``-th value, an insertion (``O(k)``)
+    only for the few entries that beat it: about 1 ns an entry, where ``np.argpartition``
+    along the rows took 43 ns (17 of the 29 s of 2·10⁴ paired atoms in ℝ²⁰). NaN entries are
+    never selected while ``k`` finite ones exist. Twin: :func:`smallest_k_numpy` (a stable
+    argsort).
 """
 
 from __future__ import annotations
@@ -39,7 +49,48 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["ctransform_tree", "ctransform_numpy"]
+__all__ = ["ctransform_tree", "ctransform_numpy", "smallest_k", "smallest_k_numpy"]
+
+
+@njit(cache=True, nogil=True)
+def smallest_k(D, k, out):  # pragma: no cover - compiled
+    n, m = D.shape
+    vals = np.empty(k)
+    idx = np.empty(k, np.int64)
+    for r in range(n):
+        cnt = 0
+        for j in range(m):
+            x = D[r, j]
+            if cnt == k:
+                if not x < vals[k - 1]:
+                    continue
+                q = k - 1
+            else:
+                if x != x:                      # NaN: after every finite entry
+                    continue
+                q = cnt
+                cnt += 1
+            while q > 0 and x < vals[q - 1]:
+                vals[q] = vals[q - 1]
+                idx[q] = idx[q - 1]
+                q -= 1
+            vals[q] = x
+            idx[q] = j
+        for j in range(m):                      # fewer than k finite entries: NaN columns
+            if cnt == k:
+                break
+            if D[r, j] != D[r, j]:
+                idx[cnt] = j
+                cnt += 1
+        for q in range(k):
+            out[r, q] = idx[q]
+    return out
+
+
+def smallest_k_numpy(D: np.ndarray, k: int) -> np.ndarray:
+    """Twin of :func:`smallest_k`: the first ``k`` columns of a stable argsort of every row
+    (NaN sorts last)."""
+    return np.argsort(D, axis=1, kind="stable")[:, :k].astype(np.int64)
 
 
 @njit(cache=True)

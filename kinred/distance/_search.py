@@ -161,6 +161,15 @@ def _centred(X: np.ndarray, Y: np.ndarray):
     return Xc, Yc, np.einsum("ij,ij->i", Xc, Xc), np.einsum("ij,ij->i", Yc, Yc)
 
 
+def _smallest(D: np.ndarray, k: int) -> np.ndarray:
+    """Columns of the ``k`` smallest entries of every row of ``D`` (ascending; ties: the
+    lower column): :func:`kinred.distance._kernels.smallest_k`."""
+    from ._kernels import smallest_k
+
+    return smallest_k(np.ascontiguousarray(D, dtype=np.float64), int(k),
+                      np.empty((D.shape[0], k), np.int64))
+
+
 def _ctransform_blas(X, Y, v, best, jbest, block, deadline, thr, m):
     """Blocked ``|x|² + |y|² − 2x·y`` (centred), then the exact values of every column within
     twice the distance error of the row's minimum (so the minimum over them is exact); the
@@ -183,7 +192,7 @@ def _ctransform_blas(X, Y, v, best, jbest, block, deadline, thr, m):
         G = np.sqrt(D2, out=D2)
         G -= v[None, :]
         if np.isfinite(thr[s:e]).any():
-            top = np.argpartition(G, m - 1, axis=1)[:, :m] if m < G.shape[1] else \
+            top = _smallest(G, m) if m < G.shape[1] else \
                 np.broadcast_to(np.arange(m), (e - s, m))
             ii = np.repeat(np.arange(e - s), m)
             exact = np.sqrt(np.sum((X[s + ii] - Y[top.ravel()]) ** 2, axis=1)) - v[top.ravel()]
@@ -220,7 +229,7 @@ def knn(X: np.ndarray, Y: np.ndarray, k: int, block: int = 512) -> np.ndarray:
     for s in range(0, X.shape[0], block):
         D2 = y2[None, :] - 2.0 * (Xc[s:s + block] @ Yc.T)
         if k < Y.shape[0]:
-            out[s:s + block] = np.argpartition(D2, k - 1, axis=1)[:, :k]
+            out[s:s + block] = _smallest(D2, k)
         else:
             out[s:s + block] = np.arange(k)[None, :]
     return out
