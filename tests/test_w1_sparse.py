@@ -147,13 +147,14 @@ def test_knn_high_dimension_matches_brute_force():
        ties=st.booleans(), nans=st.integers(0, 5), seed=st.integers(0, 2**16))
 def test_smallest_k_is_the_stable_argsort(rows, cols, k, ties, nans, seed):
     """The blocked searches' selection (numba) against its twin, a stable argsort: the same
-    columns in the same order, ties broken by the lower column, NaN entries last."""
+    columns in the same order, ties broken by the lower column, +inf then NaN entries last."""
     from kinred.distance._kernels import smallest_k, smallest_k_numpy
 
     k = min(k, cols)
     rng = np.random.default_rng(seed)
     D = rng.integers(0, 4, (rows, cols)).astype(float) if ties else rng.normal(size=(rows, cols))
     D.flat[rng.integers(0, D.size, nans)] = np.nan
+    D.flat[rng.integers(0, D.size, nans // 2)] = np.inf
     got = smallest_k(D, k, np.empty((rows, k), np.int64))
     assert np.array_equal(got, smallest_k_numpy(D, k))
 

@@ -342,8 +342,7 @@ class Morse:
                 and q.shape == out.shape and q.dtype == out.dtype == np.float64):
             return self._value_sq(q, out)
         r, e = _scratch(q.shape, q.dtype)
-        np.add(q, self.soft * self.soft, out=r) if self.soft else np.copyto(r, q)
-        np.sqrt(r, out=r)
+        np.sqrt(np.add(q, self.soft * self.soft, out=r) if self.soft else q, out=r)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
             np.negative(r, out=e)               # Ca/la · exp(−r/la) − Cr/lr · exp(−r/lr)
             np.divide(e, self.la, out=e)

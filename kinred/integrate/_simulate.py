@@ -374,7 +374,7 @@ def _controller(given, spec, rtol, atol, max_steps):
     return given
 
 
-def _check_finite(scene, x0, v0, x_moments, v_moments) -> None:
+def _check_finite(x0, v0, x_moments, v_moments) -> None:
     """The NaN/Inf test of ``x0`` and ``v0`` (their shapes were validated): the plain sum
     ``T`` of the moments that the working frame's compiled pass gave (non-finite iff an entry
     is, or the sum overflows) clears an array without a pass of its own; an array without
@@ -420,7 +420,7 @@ def _prepare(scene, x0, v0, t_span, dt, method, save, seed, rtol, atol, max_step
     observers = as_observers(observers, method)
 
     x, v, shift, (x_moments, v_moments) = frame_of(scene, x0, v0, w)
-    _check_finite(scene, x0, v0, x_moments, v_moments)
+    _check_finite(x0, v0, x_moments, v_moments)
     record = Recorder(save, obs, scene, w, shift, x0.shape, len(grid.times))
     check = DivergenceCheck(scene, getattr(solver, "table", None), method, dt, n_steps, t0,
                             x0, v0, w, v_moments)
