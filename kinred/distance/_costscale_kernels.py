@@ -24,7 +24,14 @@ nodes with excess, first in first out:
   flow and ``r_e > 0``, lowering its price to ``max(pxᵢ + c_e) − ε`` over them when none is left.
 
 Prices only fall within a phase, and ε-scaling (``ε ÷ theta`` per phase, from the last phase's
-prices and flow) keeps every phase short. A node counts as balanced when its excess is at most
+prices and flow) keeps every phase short. A **global price update** (Goldberg 1997, "An efficient
+implementation of a scaling minimum-cost flow algorithm") at each phase's start and every
+:data:`UPDATE_EVERY` ``·(n + m)`` discharges lowers every node's price by ``ε`` times its
+distance to the nearest deficit in the residual graph (arc length ``⌊r/ε⌋ + 1``, Dial's
+buckets): ε-optimality holds, and every excess then has a path of admissible edges to a deficit,
+which local relabels find only one ``ε`` at a time (10⁵ vs 8·10⁴ atoms in ℝ⁶: 7.3·10⁷
+discharges without it, the phases 2.5 times faster with it). A phase may start from a given
+flow (a warm start on a grown edge set: the flow of the last run, zero on the new edges). A node counts as balanced when its excess is at most
 ``tol`` -- which must exceed ``|Σ a − Σ b|``, else the last crumbs of mass circulate for ever.
 
 Nothing here is trusted: the prices only choose the candidate edges (those of small reduced
@@ -38,6 +45,12 @@ import numpy as np
 from numba import njit
 
 __all__ = ["transport_prices"]
+
+#: A global price update (:func:`_global_update`) at each phase's start and after every
+#: ``UPDATE_EVERY·(n + m)`` discharges.
+UPDATE_EVERY = 2
+#: Buckets of the update's search, per node (distances beyond: the search stops there).
+BUCKETS_PER_NODE = 4
 
 
 @njit(cache=True)
@@ -84,28 +97,139 @@ def _push_row(i, indptr, indices, cost, px, py, f, exx, exy, eps):
 
 
 @njit(cache=True)
+def _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, exy, eps, tol,
+                   dist, done, bhead, enode, enext):
+    """Goldberg's global price update: ``D(w)``, the length of a shortest residual path from
+    node ``w`` to a node short of its demand with arc lengths ``ℓ = ⌊r/ε⌋ + 1`` (``≥ 0`` under
+    ε-optimality), by Dial's buckets searched backwards from the deficits; then
+    ``p(w) −= ε·D(w)``. Every reduced cost stays ``≥ −ε`` (``r − εℓ ≥ −ε``) and the arcs of the
+    shortest paths become admissible (``r < 0``), so every excess has an admissible path to a
+    deficit. The search stops once every node with excess is reached; the nodes not reached
+    get the distance it stopped at (still valid: none of them is closer). Returns the
+    number of nodes reached. Nodes ``0 … n−1`` are rows, ``n …`` columns; ``costc, rowc``:
+    the costs and rows of the edges in column order."""
+    n = indptr.size - 1
+    m = colptr.size - 1
+    nb = bhead.size
+    for w in range(n + m):
+        dist[w] = nb
+        done[w] = 0
+    for d in range(nb):
+        bhead[d] = -1
+    used = 0
+    todo = 0
+    for i in range(n):
+        if exx[i] > tol:
+            todo += 1
+    for j in range(m):
+        if exy[j] > tol:
+            todo += 1
+        elif exy[j] < -tol:
+            dist[n + j] = 0
+            enode[used] = n + j
+            enext[used] = bhead[0]
+            bhead[0] = used
+            used += 1
+    if used == 0 or todo == 0:
+        return 0
+    reached = 0
+    inv = 1.0 / eps
+    d = 0
+    while d < nb and todo > 0:
+        k = bhead[d]
+        if k < 0:
+            d += 1
+            continue
+        bhead[d] = enext[k]
+        w = enode[k]
+        if done[w] or dist[w] != d:
+            continue
+        done[w] = 1
+        reached += 1
+        if w < n:
+            if exx[w] > tol:
+                todo -= 1
+            i = w                       # arcs into a row: j -> i where f_e > 0
+            for e in range(indptr[i], indptr[i + 1]):
+                if f[e] > 0.0:
+                    j = indices[e]
+                    r = -(cost[e] + px[i] - py[j])
+                    ln = int(np.floor(r * inv)) + 1
+                    if ln < 0:
+                        ln = 0
+                    nd = d + ln
+                    if nd < dist[n + j] and nd < nb:
+                        dist[n + j] = nd
+                        enode[used] = n + j
+                        enext[used] = bhead[nd]
+                        bhead[nd] = used
+                        used += 1
+        else:
+            j = w - n
+            if exy[j] > tol:
+                todo -= 1
+            for k2 in range(colptr[j], colptr[j + 1]):   # arcs into a column: i -> j
+                i = rowc[k2]
+                r = costc[k2] + px[i] - py[j]
+                ln = int(np.floor(r * inv)) + 1
+                if ln < 0:
+                    ln = 0
+                nd = d + ln
+                if nd < dist[i] and nd < nb:
+                    dist[i] = nd
+                    enode[used] = i
+                    enext[used] = bhead[nd]
+                    bhead[nd] = used
+                    used += 1
+    for w in range(n + m):
+        dw = dist[w] if done[w] else d
+        if w < n:
+            px[w] -= eps * dw
+        else:
+            py[w - n] -= eps * dw
+    return reached
+
+
+@njit(cache=True)
 def transport_prices(indptr, indices, cost, colptr, colidx, rowof, a, b, px, py, eps_start,
-                     eps_end, theta, tol, max_work, phase_work):
+                     eps_end, theta, tol, max_work, phase_work, flow):
     """ε-scaling push–relabel; updates ``px, py`` in place and returns ``(f, status, work)``:
     the flow on the edges, status 0 (every node balanced within ``tol`` at ``ε = eps_end``) or
     1 (``max_work`` discharges spent), and the discharges. ``colptr, colidx``: each column's
     edges; ``rowof``: each edge's row. Every row and column must have an edge.
     ``phase_work[p]`` receives the discharges of phase ``p`` (phases past its size are not
-    counted)."""
+    counted). ``flow``: the starting flow on the edges (empty: zero), e.g. that of an earlier
+    call on fewer edges, with ``eps_start`` its ``ε`` (one phase: a warm start)."""
     n = indptr.size - 1
     m = colptr.size - 1
     size = n + m
-    f = np.zeros(cost.size)
+    f = np.zeros(cost.size) if flow.size == 0 else flow.copy()
     exx = a.copy()
     exy = -b
+    if flow.size:
+        for i in range(n):
+            for e in range(indptr[i], indptr[i + 1]):
+                exx[i] -= f[e]
+                exy[indices[e]] += f[e]
     queue = np.empty(size, np.int64)
     inq = np.zeros(size, np.uint8)
     work = 0
     eps = eps_start
     phase = 0
+    dist = np.empty(size, np.int64)
+    done = np.empty(size, np.uint8)
+    bhead = np.empty(BUCKETS_PER_NODE * size, np.int64)
+    enode = np.empty(cost.size + size, np.int64)
+    enext = np.empty(cost.size + size, np.int64)
+    every = max(1, int(UPDATE_EVERY * size))
+    costc = cost[colidx]
+    rowc = rowof[colidx]
     while True:
         start = work
         _restore(indptr, indices, cost, px, py, f, exx, exy, eps)
+        _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, exy, eps,
+                       tol, dist, done, bhead, enode, enext)
+        last = work
         head = 0
         cnt = 0
         for node in range(size):
@@ -122,6 +246,10 @@ def transport_prices(indptr, indices, cost, colptr, colidx, rowof, a, b, px, py,
             work += 1
             if work > max_work:
                 return f, 1, work
+            if work - last >= every:
+                _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx,
+                               exy, eps, tol, dist, done, bhead, enode, enext)
+                last = work
             if node < n:
                 if exx[node] <= tol:
                     continue

@@ -289,6 +289,30 @@ def _certify(X, a, Y, b, u, v, plan, trees, tiny, deadline=None):
     return lower, scale, int(open_f.sum()) + int(open_g.sum()), new
 
 
+def _price_search(X, Y, trees, deadline):
+    """The ``search`` of :func:`kinred.distance._costscale.prune`: over all pairs, up to
+    :data:`VIOLATORS_PER_ROW` per row of those whose reduced cost ``|xᵢ − yⱼ| + pxᵢ − pyⱼ``
+    is below ``−slack`` (the c-transform's search of ``py`` with threshold ``−px − slack``);
+    nothing once the deadline has passed."""
+    m = Y.shape[0]
+
+    def search(keys, cost, px, py, slack):
+        if deadline is not None and time.perf_counter() > deadline:
+            return keys[:0]
+        rows, cols = np.divmod(keys, m)
+        f0, j0 = first_per(rows, X.shape[0], cost - py[cols], cols)
+        try:
+            _, _, cand = ctransform(X, Y, py, f0, j0, trees[1], deadline=deadline,
+                                    thr=-px - slack, m=VIOLATORS_PER_ROW,
+                                    rows=None if trees[0] is None else trees[0].order)
+        except OutOfTime:
+            return keys[:0]
+        ri, qi = np.nonzero(cand >= 0)
+        return ri.astype(np.int64) * m + cand[ri, qi]
+
+    return search
+
+
 def _cheap_lower(X, a, Y, b, rng) -> float:
     """A certified lower bound without the c-transform: the best 1-D projection (exact 1-D W1
     of the projected measures, a Kantorovich–Rubinstein bound)."""
@@ -405,12 +429,12 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     keys, coupling = _initial_keys(X, a, Y, b, k, paired, rng)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
     tm["graph"] = time.perf_counter() - t0
-    pool = None          # pruned: the unpruned candidate graph, with the violators found
     if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
         s = time.perf_counter()
-        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline, run_until=_child_or_none)
+        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline, run_until=_child_or_none,
+                       search=_price_search(X, Y, trees, budget.deadline))
         if pruned is not None:
-            pool, keys = keys, pruned
+            keys = pruned[0]
         tm["prices"] = time.perf_counter() - s
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
@@ -482,17 +506,6 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         reason = budget.stop_reason(keys.size, merged.size, it, n_open, (n, m, d, k))
         if reason:
             break
-        if pool is not None:
-            # the violators join the pool; the next solve runs on the pool's edges of small
-            # reduced cost under prices warmed from this solve's duals, and the violators
-            s = time.perf_counter()
-            grown = sorted_unique(np.concatenate([pool, new]))
-            kept = [plan[0] * m + plan[1]] + ([new] if grown.size == pool.size else [])
-            pool, kept = grown, np.concatenate(kept)
-            pruned = prune(X, a, Y, b, pool, kept, budget.deadline, start=(u, v),
-                           run_until=_child_or_none)
-            merged = merged if pruned is None else pruned
-            tm["prices"] += time.perf_counter() - s
         keys = merged
     if not exact:
         pad = 8 * _EPS * (upper + scale)
