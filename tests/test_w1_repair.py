@@ -170,3 +170,16 @@ def test_a_repair_past_its_allowance_hands_over_to_column_generation(monkeypatch
     assert r.lower <= ref * (1 + 1e-12) and r.upper >= ref * (1 - 1e-12)
     assert r.exact and r.value == pytest.approx(ref, rel=1e-12)
     assert r.info["iterations"] >= 2 and r.info["repair_work"] == 0  # stopped at once
+
+
+def test_a_spanning_tree_plan_goes_to_column_generation_without_repair(monkeypatch):
+    """Weighted atoms in general position: the plan has n + m − 1 positive entries, its duals
+    are unique up to a constant, and the repair is not called (it would only spend its
+    allowance); column generation alone reaches POT's dense optimum, exactly."""
+    calls = []
+    monkeypatch.setattr(RP, "repair", lambda *a, **k: calls.append(1) or pytest.fail("repair"))
+    X, a, Y, b = _problem(5, 1500, 1200, 3, False)
+    r = w1(X, Y, "sparse", a=a, b=b)
+    ref = float(ot.emd2(a, b, cdist(X, Y), numItermax=10**7))
+    assert r.exact and r.value == pytest.approx(ref, rel=1e-12)
+    assert not calls
