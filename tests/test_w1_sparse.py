@@ -165,7 +165,7 @@ def test_candidate_keys_are_deduplicated():
     x = rng.normal(size=(400, 3))
     y = x.copy()                                         # identity + kNN list (i, i) twice
     keys, _ = sparse_mod._initial_keys(x, np.full(400, 1 / 400), y, np.full(400, 1 / 400), 4,
-                                       True, rng)
+                                       True)
     assert np.unique(keys).size == keys.size and np.all(np.diff(keys) > 0)
     r = w1(x, y + 0.01, "sparse")
     assert r.exact and r.value == pytest.approx(0.01 * np.sqrt(3), rel=1e-12)
@@ -481,3 +481,21 @@ def test_a_failing_child_raises_a_named_error(monkeypatch):
     monkeypatch.setattr(sparse_mod, "_solve", boom)
     with pytest.raises(NotConverged, match="status 2"):
         w1(x, y, "sparse", seed=0, max_dense_bytes=0, max_seconds=60.0)
+
+
+def test_the_path_does_not_depend_on_the_seed():
+    """The exact method draws nothing: the monotone coupling's axis is computed, so two calls
+    without a seed take the same path (same solves, same edges) to the same value -- and a
+    bracket, when the budget stops the method, is the same too."""
+    rng = np.random.default_rng(8)
+    x, y = rng.normal(size=(3000, 3)), rng.normal(size=(2500, 3)) * 0.8 + 0.1
+    a, b = rng.random(3000), rng.random(2500)
+    a, b = a / a.sum(), b / b.sum()
+    r1, r2 = (w1(x, y, "sparse", a=a, b=b, neighbors=3) for _ in range(2))
+    assert r1.exact and r1.value == r2.value
+    assert r1.info["iterations"] == r2.info["iterations"] and r1.info["edges"] == r2.info["edges"]
+    axis = sparse_mod.principal_axis(np.concatenate([x, y]), np.concatenate([a, b]) / 2)
+    w = np.concatenate([a, b]) / 2
+    z = np.concatenate([x, y]) - w @ np.concatenate([x, y])
+    lam = axis @ (z.T @ (w[:, None] * z)) @ axis
+    assert lam == pytest.approx(np.linalg.eigvalsh(z.T @ (w[:, None] * z))[-1], rel=1e-12)

@@ -60,6 +60,21 @@ def _principal_axis(X: np.ndarray, w: np.ndarray, rng, iters: int = 30) -> np.nd
     return v / max(np.linalg.norm(v), 1e-300)
 
 
+def principal_axis(X: np.ndarray, w: np.ndarray, block: int = 1 << 16) -> np.ndarray:
+    """The leading eigenvector of the weighted covariance ``Σ wᵢ (xᵢ − x̄)(xᵢ − x̄)ᵀ``, drawing
+    nothing (:func:`numpy.linalg.eigh` of the ``d × d`` matrix, accumulated over row blocks:
+    no ``(N, d)`` temporary), its largest component made positive: the same inputs give the
+    same axis, whatever the seed."""
+    mean = w @ X
+    C = np.zeros((X.shape[1], X.shape[1]))
+    for s in range(0, X.shape[0], block):
+        B = X[s:s + block] - mean
+        C += B.T @ (w[s:s + block, None] * B)
+    vecs = np.linalg.eigh(C)[1]
+    v = vecs[:, -1]
+    return v if v[np.argmax(np.abs(v))] > 0 else -v
+
+
 def projection_lower(P: Pts, Q: Pts, rng, n_projections: int = 64, n_refine: int = 25):
     """Max over directions θ of the exact 1-D W1 of ``θ#μ`` and ``θ#ν`` (a lower bound).
 

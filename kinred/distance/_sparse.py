@@ -47,7 +47,7 @@ import numpy as np
 from .._validate import check_alloc
 from ..errors import NotConverged
 from ._assign import ASSIGNMENT, is_assignment, load_kernels, solve_assignment
-from ._bracket import _principal_axis
+from ._bracket import principal_axis
 from ._costscale import PRUNE_EDGES, prune
 from ._inputs import Pts
 from ._oned import monotone_pieces
@@ -103,27 +103,28 @@ class SparseOutcome:
     solver: str = ""
 
 
-def _coupling_edges(X, a, Y, b, paired: bool, rng):
-    """One coupling of the full measures, identity or monotone along an axis: its support
-    ``(i, j)`` and masses."""
+def _coupling_edges(X, a, Y, b, paired: bool):
+    """One coupling of the full measures, identity or monotone along the pooled atoms'
+    principal axis (computed, not drawn: the candidate graph, hence the whole computation,
+    does not depend on the seed): its support ``(i, j)`` and masses."""
     if paired:
         idx = np.arange(X.shape[0], dtype=np.int64)
         return idx, idx, a
     pooled = np.concatenate([X, Y])
     pw = np.concatenate([a, b]) / 2.0
-    th = _principal_axis(pooled, pw, rng)
+    th = principal_axis(pooled, pw)
     i, j, mass = monotone_pieces(X @ th, a, Y @ th, b)
     return i.astype(np.int64), j.astype(np.int64), mass
 
 
-def _initial_keys(X, a, Y, b, k: int, paired: bool, rng):
+def _initial_keys(X, a, Y, b, k: int, paired: bool):
     """The candidate graph's keys ``i·m + j`` (sorted, unique) and those of its coupling of the
     full measures (all pairs when there are few)."""
     n, m = X.shape[0], Y.shape[0]
     if n * m <= _ALL_PAIRS:
         every = np.arange(n * m, dtype=np.int64)
         return every, every
-    ci, cj, _ = _coupling_edges(X, a, Y, b, paired, rng)
+    ci, cj, _ = _coupling_edges(X, a, Y, b, paired)
     parts = [ci * m + cj]
     nx = knn(X, Y, k)
     parts.append((np.repeat(np.arange(n, dtype=np.int64), nx.shape[1]) * m) + nx.ravel())
@@ -426,7 +427,7 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                      else int(max_edges), max_seconds, max_bytes, t0)
     price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
     tm = {}
-    keys, coupling = _initial_keys(X, a, Y, b, k, paired, rng)
+    keys, coupling = _initial_keys(X, a, Y, b, k, paired)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
     tm["graph"] = time.perf_counter() - t0
     if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
