@@ -20,7 +20,7 @@ prices are **extended** (:func:`_extended`): from the late phases on, ``search``
 *all* pairs those of reduced cost below ``−SEARCH_EPS·ε`` (the c-transform's bounded search,
 with the prices as duals), they join the graph, and the phase runs again warm from its prices
 and flow -- column generation done on ε-optimal prices, where it is cheap, instead of on exact
-duals (10⁵ vs 8·10⁴ atoms in ℝ⁶: 240 s and not closed before, about 110 s exact with it).
+duals (10⁵ vs 8·10⁴ atoms in ℝ⁶: 240 s and not closed before, 90–105 s exact with it).
 
 Nothing is lost if a guess is wrong: column generation adds every pair whose dual constraint
 fails, over all pairs, and the value is proved by the c-transform as always.
@@ -75,9 +75,9 @@ def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, run
 
     ``search(keys, cost, px, py, slack)``: the keys of pairs, over *all* pairs, whose reduced
     cost ``c + px − py`` is below ``−slack`` (or an empty array). With it the prices are
-    extended to the full problem: the violators join the pool and one warm phase at
-    ``ε_end`` (from the prices and flow reached) restores ε-optimality, up to
-    :data:`EXTEND_ROUNDS` times -- so that the kept edges hold an optimal plan of the full
+    extended to the full problem (:func:`_extended`): the violators join the pool and the
+    phase runs again from the prices and flow reached, restoring ε-optimality, up to
+    :data:`EXTEND_ROUNDS` times per phase -- so that the kept edges hold an optimal plan of the full
     measures, not only of the ``k``-nearest-neighbour graph."""
     n, m = X.shape[0], Y.shape[0]
     rows, cols = np.divmod(keys, m)

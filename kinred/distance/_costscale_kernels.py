@@ -31,8 +31,10 @@ distance to the nearest deficit in the residual graph (arc length ``⌊r/ε⌋ +
 buckets): ε-optimality holds, and every excess then has a path of admissible edges to a deficit,
 which local relabels find only one ``ε`` at a time (10⁵ vs 8·10⁴ atoms in ℝ⁶: 7.3·10⁷
 discharges without it, the phases 2.5 times faster with it). A phase may start from a given
-flow (a warm start on a grown edge set: the flow of the last run, zero on the new edges). A node counts as balanced when its excess is at most
-``tol`` -- which must exceed ``|Σ a − Σ b|``, else the last crumbs of mass circulate for ever.
+flow (a warm start on a grown edge set: the flow of the last run, zero on the new edges).
+
+A node counts as balanced when its excess is at most ``tol`` -- which must exceed
+``|Σ a − Σ b|``, else the last crumbs of mass circulate for ever.
 
 Nothing here is trusted: the prices only choose the candidate edges (those of small reduced
 cost) on which the exact solver runs, and the result is proved by its dual over all pairs as
