@@ -488,8 +488,8 @@ def test_the_path_does_not_depend_on_the_seed():
     without a seed take the same path (same solves, same edges) to the same value -- and a
     bracket, when the budget stops the method, is the same too."""
     rng = np.random.default_rng(8)
-    x, y = rng.normal(size=(3000, 3)), rng.normal(size=(2500, 3)) * 0.8 + 0.1
-    a, b = rng.random(3000), rng.random(2500)
+    x, y = rng.normal(size=(1500, 3)), rng.normal(size=(1200, 3)) * 0.8 + 0.1
+    a, b = rng.random(1500), rng.random(1200)
     a, b = a / a.sum(), b / b.sum()
     r1, r2 = (w1(x, y, "sparse", a=a, b=b, neighbors=3) for _ in range(2))
     assert r1.exact and r1.value == r2.value
