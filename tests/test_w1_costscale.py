@@ -114,6 +114,26 @@ def test_pruned_graph_gives_the_dense_optimum(monkeypatch, d, seed):
     assert r.info["seconds_prices"] >= 0.0
 
 
+@pytest.mark.parametrize("budget", [None, 120.0])
+def test_an_infeasible_pruned_graph_gets_the_coupling(monkeypatch, budget):
+    """A pruned graph that holds no coupling (here: column 0 without edges -- the flow's
+    support is feasible only within the balance tolerance) gets the full measures' coupling
+    and gives the dense optimum, with or without the forked solves of a time budget."""
+    monkeypatch.setattr(S, "PRUNE_EDGES", 0)
+    monkeypatch.setattr(S, "FORK_EDGES", 0)
+    m = 240
+
+    def pruned_too_far(*args, **kwargs):
+        kept, pool = CS.prune(*args, **kwargs)
+        return kept[kept % m != 0], pool
+
+    monkeypatch.setattr(S, "prune", pruned_too_far)
+    X, a, Y, b = _problem(3, 300, m, 3, 0.0)
+    r = w1(X, Y, "sparse", a=a, b=b, max_seconds=budget)
+    dense = ot.emd2(a, b, ot.dist(X, Y, metric="euclidean"))
+    assert r.exact and r.value == pytest.approx(dense, rel=1e-12)
+
+
 def test_pruning_within_a_time_budget_gives_the_dense_optimum(monkeypatch):
     """The forked path (a deadline set) gives the same exact value."""
     monkeypatch.setattr(S, "PRUNE_EDGES", 0)
@@ -228,8 +248,8 @@ def test_extended_prices_hold_the_optimal_plan(monkeypatch):
     from kinred.distance._search import CTree
 
     trees = (CTree(X), CTree(Y))
-    kept, pool = CS.prune(X, a, Y, b, keys, keys[:0], search=S._price_search(X, Y, trees, None))
+    kept, pool = CS.prune(X, a, Y, b, keys, search=S._price_search(X, Y, trees, None))
     assert pool.size > keys.size and np.setdiff1d(support, kept).size == 0
     assert kept.size < pool.size
-    plain = CS.prune(X, a, Y, b, keys, keys[:0])[0]           # without the search: misses
+    plain = CS.prune(X, a, Y, b, keys)[0]           # without the search: misses
     assert np.setdiff1d(support, plain).size > 0

@@ -48,18 +48,6 @@ def _proj(P: Pts, Q: Pts, theta: np.ndarray):
     return val, grad, th
 
 
-def _principal_axis(X: np.ndarray, w: np.ndarray, rng, iters: int = 30) -> np.ndarray:
-    Xc = X - w @ X
-    v = rng.standard_normal(X.shape[1])
-    for _ in range(iters):
-        v_new = Xc.T @ (w * (Xc @ v))
-        nrm = np.linalg.norm(v_new)
-        if not nrm > 0:
-            break
-        v = v_new / nrm
-    return v / max(np.linalg.norm(v), 1e-300)
-
-
 def principal_axis(X: np.ndarray, w: np.ndarray, block: int = 1 << 16) -> np.ndarray:
     """The leading eigenvector of the weighted covariance ``Σ wᵢ (xᵢ − x̄)(xᵢ − x̄)ᵀ``, drawing
     nothing (:func:`numpy.linalg.eigh` of the ``d × d`` matrix, accumulated over row blocks:
@@ -104,7 +92,7 @@ def projection_lower(P: Pts, Q: Pts, rng, n_projections: int = 64, n_refine: int
         cands.append(dm)
     pooled = np.concatenate([P.points, Q.points])
     pw = np.concatenate([P.weights, Q.weights]) / 2.0
-    cands.append(_principal_axis(pooled, pw, rng))
+    cands.append(principal_axis(pooled, pw))
     for _ in range(int(n_projections)):
         cands.append(rng.standard_normal(d))
     scored = []
@@ -189,7 +177,7 @@ def _half(proj: np.ndarray, idx: np.ndarray, mass: np.ndarray):
     return (li[lk], lm[lk]), (ri[rk], rm[rk])
 
 
-def hierarchical_upper(P: Pts, Q: Pts, rng, leaf_size: int = 512, max_depth: int = 40):
+def hierarchical_upper(P: Pts, Q: Pts, leaf_size: int = 512, max_depth: int = 40):
     """Cost of a hierarchical coupling of the full measures (an upper bound on W1).
 
     Both measures are split recursively at half mass along the principal axis of the pooled
@@ -217,7 +205,7 @@ def hierarchical_upper(P: Pts, Q: Pts, rng, leaf_size: int = 512, max_depth: int
             continue
         pooled = np.concatenate([X, Y])
         pw = np.concatenate([ma / sa, mb / sb]) / 2.0
-        th = _principal_axis(pooled, pw, rng, iters=15)
+        th = principal_axis(pooled, pw)
         if depth >= max_depth:
             i, j, m = monotone_pieces(X @ th, ma / sa, Y @ th, mb / sb)
             total += mass * _pieces_cost(X, Y, i, j, m)
@@ -248,7 +236,7 @@ def bracket_atoms(P: Pts, Q: Pts, rng, *, n_projections: int = 64, leaf_size: in
     if extra_lower is not None:
         lows[extra_lower[0]] = extra_lower[1]
     ups = {"monotone coupling along the best projection": monotone_upper(P, Q, th)}
-    hc, nl = hierarchical_upper(P, Q, rng, leaf_size=leaf_size)
+    hc, nl = hierarchical_upper(P, Q, leaf_size=leaf_size)
     ups[f"hierarchical coupling ({nl} exact leaves of <= {leaf_size} atoms)"] = hc
     if extra_upper is not None:
         ups[extra_upper[0]] = extra_upper[1]

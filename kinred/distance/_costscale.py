@@ -10,8 +10,9 @@ under exact duals, which ε-optimal prices move by little.
 :func:`prune` computes ε-optimal prices by cost scaling
 (:func:`kinred.distance._costscale_kernels.transport_prices`, ``ε`` from
 :data:`EPS_START` to :data:`EPS_END` times the mean edge cost) and keeps the edges with
-``r_e ≤`` :data:`KEEP_EPS` ``· ε_end``, the support of its ε-optimal flow and the full
-measures' coupling (so the pruned problem stays feasible).
+``r_e ≤`` :data:`KEEP_EPS` ``· ε_end`` and the support of its ε-optimal flow (whose
+margins are the weights within the balance tolerance: should the pruned problem be
+infeasible, :func:`kinred.distance._sparse.sparse_w1` adds a coupling of the full measures).
 
 Prices ε-optimal on the ``k``-nearest-neighbour graph only are not enough when the optimal plan
 of the full measures uses pairs outside it: the kept edges then hold the graph's optimum, and
@@ -69,13 +70,12 @@ BALANCE = 1e-9
 WORK_PER_NODE = 4000
 
 
-def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, run_until=None,
-          search=None):
+def prune(X, a, Y, b, keys: np.ndarray, deadline=None, run_until=None, search=None):
     """``(kept, pool)``: the edges of ``pool`` worth solving on and the pool -- ``keys``
     (``i·m + j``) grown by the pairs ``search`` found -- or ``None`` (no prices: a node
-    without edges, the work budget spent, the deadline passed). ``coupling``: keys always
-    kept (one coupling of the full measures at least). ``run_until(fn, deadline)``: runs
-    ``fn`` stopped at ``deadline`` (``None`` when stopped); used when ``deadline`` is set.
+    without edges, the work budget spent, the deadline passed). ``run_until(fn, deadline)``:
+    runs ``fn`` stopped at ``deadline`` (``None`` when stopped); used when ``deadline`` is
+    set.
 
     ``search(keys, cost, px, py, slack)``: the keys of pairs, over *all* pairs, whose reduced
     cost ``c + px − py`` is below ``−slack`` (or an empty array). With it the prices are
@@ -98,7 +98,7 @@ def prune(X, a, Y, b, keys: np.ndarray, coupling: np.ndarray, deadline=None, run
     rows, cols = np.divmod(keys, m)
     rc = cost + px[rows] - py[cols]
     keep = (rc <= KEEP_EPS * EPS_END * unit) | (f > 0)
-    return sorted_unique(np.concatenate([keys[keep], coupling])), keys
+    return keys[keep], keys
 
 
 def _extended(X, a, Y, b, keys, cost, unit, deadline, run_until, search):

@@ -107,9 +107,9 @@ def _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, e
     ``p(w) −= ε·D(w)``. Every reduced cost stays ``≥ −ε`` (``r − εℓ ≥ −ε``) and the arcs of the
     shortest paths become admissible (``r < 0``), so every excess has an admissible path to a
     deficit. The search stops once every node with excess is reached; the nodes not reached
-    get the distance it stopped at (still valid: none of them is closer). Returns the
-    number of nodes reached. Nodes ``0 … n−1`` are rows, ``n …`` columns; ``costc, rowc``:
-    the costs and rows of the edges in column order."""
+    get the distance it stopped at (still valid: none of them is closer). Nodes ``0 … n−1``
+    are rows, ``n …`` columns; ``costc, rowc``: the costs and rows of the edges in column
+    order."""
     n = indptr.size - 1
     m = colptr.size - 1
     nb = bhead.size
@@ -133,8 +133,7 @@ def _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, e
             bhead[0] = used
             used += 1
     if used == 0 or todo == 0:
-        return 0
-    reached = 0
+        return
     inv = 1.0 / eps
     d = 0
     while d < nb and todo > 0:
@@ -147,7 +146,6 @@ def _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, e
         if done[w] or dist[w] != d:
             continue
         done[w] = 1
-        reached += 1
         if w < n:
             if exx[w] > tol:
                 todo -= 1
@@ -189,7 +187,6 @@ def _global_update(indptr, indices, cost, colptr, costc, rowc, px, py, f, exx, e
             px[w] -= eps * dw
         else:
             py[w - n] -= eps * dw
-    return reached
 
 
 @njit(cache=True)

@@ -154,6 +154,8 @@ def _solve(a, b, rows, cols, costs, n, m, num_iter_max, assignment=False):
         warnings.simplefilter("always")
         G, log = ot.emd(a, b, M, numItermax=it, log=True)
     code = int(log.get("result_code", 1))
+    if code == 0:
+        raise _Infeasible
     if code != 1:
         raise NotConverged(
             f"w1(method='sparse'): POT's network simplex on {rows.size} candidate edges of a "
@@ -184,6 +186,12 @@ ASSIGN_SECONDS_PER_EDGE = 6e-6
 
 class _SolveTimedOut(Exception):
     """Internal: a network-simplex solve passed the deadline (its child was stopped)."""
+
+
+class _Infeasible(Exception):
+    """Internal: the candidate graph holds no coupling of the two measures (POT's status 0).
+    Only a pruned graph can be so: it keeps the ε-optimal flow's support, whose margins are
+    the weights only within the cost scaling's balance tolerance."""
 
 
 def _solve_until(a, b, rows, cols, costs, n, m, num_iter_max, deadline):
@@ -430,12 +438,13 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     keys, coupling = _initial_keys(X, a, Y, b, k, paired)
     trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
     tm["graph"] = time.perf_counter() - t0
+    unpruned = None          # pruned: the coupling that makes the graph feasible if it is not
     if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
         s = time.perf_counter()
-        pruned = prune(X, a, Y, b, keys, keys[:0], budget.deadline, run_until=_child_or_none,
+        pruned = prune(X, a, Y, b, keys, budget.deadline, run_until=_child_or_none,
                        search=_price_search(X, Y, trees, budget.deadline))
         if pruned is not None:
-            keys = pruned[0]
+            keys, unpruned = pruned[0], coupling
         tm["prices"] = time.perf_counter() - s
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
@@ -447,6 +456,16 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
         try:
             up, u, v, plan, noise, solver = _solve_round(X, a, Y, b, keys, num_iter_max,
                                                          budget.deadline)
+        except _Infeasible:
+            if unpruned is None:
+                raise NotConverged(f"w1(method='sparse'): POT's network simplex found the "
+                                   f"{keys.size} candidate edges of a {n} x {m} problem "
+                                   "infeasible although they hold a coupling of the measures")
+            # the full measures' coupling makes the pruned graph feasible (kept out until
+            # needed: its long edges make the solves three times slower)
+            tm["solve"] += time.perf_counter() - s
+            keys, unpruned, it = sorted_unique(np.concatenate([keys, unpruned])), None, it - 1
+            continue
         except _SolveTimedOut:
             tm["solve"] += time.perf_counter() - s
             lower, upper, reason, exact = _timed_out(X, a, Y, b, paired, rng, lower, upper,
