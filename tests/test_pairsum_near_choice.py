@@ -110,10 +110,12 @@ def test_auto_refuses_the_ring_of_radius_20_at_a_million_within_seconds():
 
 
 def test_auto_builds_no_grid_for_a_candidate_that_cannot_win():
-    """The 3-D slab of issue 24 at small N: Dense wins and the NUFFT's grids (seconds to
-    build) are not built just to be discarded; the choice is the estimates' minimum."""
+    """The 3-D slab of issue 24 at small N: the NUFFT loses clearly and its grids (seconds to
+    build) are not built just to be discarded; the choice is the estimates' minimum (here
+    the cell list: measured 13 ms against Dense's 24 ms; at N = 4000 the NUFFT already wins
+    per right-hand side, 0.16 s against Dense's 0.22)."""
     rng = np.random.default_rng(0)
-    n = 12_000
+    n = 1500
     x = rng.uniform(0, 1, (n, 3)) * np.array([29.0, 6.0, 1.7]) + 1e4
     v = rng.normal(size=(n, 3))
     sc = Scene([Alignment(CuckerSmale(0.8, 0.7)),
@@ -121,8 +123,8 @@ def test_auto_builds_no_grid_for_a_candidate_that_cannot_win():
     plan = sc._plan(n, 3)
     got = sc.pairsum.choose(plan, x, v)
     est = plan.info()["estimates"]
-    assert got == "dense" and est["dense"] == min(est.values())
-    assert est["nufft"] > 2.0 * est["dense"]
+    assert got == "cells" and est[got] == min(est.values())
+    assert est["nufft"] > 2.0 * est[got]
     assert all(g.builds == 0 for g in plan.candidates["nufft"][1].groups)
 
 

@@ -10,9 +10,16 @@ from __future__ import annotations
 
 import math
 
-#: Dense: pairs per second with compiled kernels and with numpy kernels.
-DENSE_RATE = 4e8
-DENSE_RATE_NUMPY = 8e7
+#: Dense: seconds per pair and engine thread of one term, by the kernel's compiled form
+#: (``kernel.compiled_form()[0]``; None: a numpy kernel, e.g. Morse), plus
+#: :data:`DENSE_DIM_SECONDS` per pair, term and dimension (the distances and the products).
+#: Any numpy kernel sends the whole scene through the numpy strips, its compiled kernels
+#: included. Measured per pair and thread (N = 10⁴ and 4000, d = 2, 3, 10, 50, 200):
+#: Cucker–Smale β = 1.5 (``cs_halfint``) 4.2, 3.3, 5.7, 11, 39 ns; β = 0.7 (``cs_pow``)
+#: 9.4, 7.4, 12, 22, 47 ns; soft Morse 21, 21, 30, 28, 57 ns; both terms 43, 42, 68, 54,
+#: 106 ns (the 3-D slab of issue 24 was estimated at 3× too fast by one rate per scene).
+DENSE_TERM_SECONDS = {"cs_halfint": 3.5e-9, "cs_pow": 8e-9, None: 2e-8}
+DENSE_DIM_SECONDS = 2e-10
 #: Cell list: seconds per pair within the cutoff (gather, numpy kernel, scatter) and per
 #: candidate pair of the stencil; candidates per pair within the cutoff, by dimension.
 CELL_PAIR_SECONDS = 8e-8
@@ -34,10 +41,14 @@ SPREAD_SECONDS = 1e-9
 FFT_SECONDS = 1e-9
 
 
-def dense_seconds(n: int, dim: int, sources: int, compiled: bool) -> float:
-    """One dense right-hand side."""
-    rate = DENSE_RATE if compiled else DENSE_RATE_NUMPY
-    return sources * n * (n - 1) / 2.0 * max(1.0, (dim + 1) / 4.0) / rate
+def dense_seconds(n: int, dim: int, kinds: list) -> float:
+    """One dense right-hand side on one engine thread: ``n(n − 1)/2`` pairs times the sum over
+    the terms of :data:`DENSE_TERM_SECONDS` (``kinds``: each term's compiled kind, None for a
+    numpy kernel) and ``dim ×`` :data:`DENSE_DIM_SECONDS`."""
+    numpy_path = any(kd not in DENSE_TERM_SECONDS or kd is None for kd in kinds)
+    per = sum(DENSE_TERM_SECONDS[None if numpy_path else kd] + dim * DENSE_DIM_SECONDS
+              for kd in kinds)
+    return n * (n - 1) / 2.0 * per
 
 
 def cell_seconds(pairs: float, k: int, terms: int = 1, fused: bool = False,

@@ -45,8 +45,7 @@ REDECIDE = 1.25
 DENSE_ENOUGH = 0.02
 #: NUFFT grids are not built to estimate a candidate whose cheap estimate (no grid:
 #: ``nufft.group_estimate``) exceeds this many times the best other estimate or
-#: ``max_seconds`` (the 3-D slab of issue 24, N = 3·10⁴: 5 s of grid building for a
-#: candidate estimated 8 s against Dense's 3 s).
+#: ``max_seconds`` (a grid measured for a candidate that loses anyway costs seconds).
 CLEAR_LOSS = 2.0
 #: Default ``max_seconds``: no candidate estimated within it is refused (TooLarge).
 MAX_SECONDS = 60.0
@@ -204,7 +203,7 @@ def costs(plan: AutoPlan, state: dict, max_seconds: float = MAX_SECONDS) -> dict
     out = {"dense": math.inf}
     if plan.candidates["dense"][1] is not None:
         out["dense"] = _cost.dense_seconds(
-            n, dim, len(terms.sources), all(t.compiled is not None for t in terms.terms)) / nt
+            n, dim, [None if t.compiled is None else t.compiled[0] for t in terms.terms]) / nt
     if out["dense"] <= DENSE_ENOUGH:     # nothing to gain: do not build the others' grids
         out["nufft"] = out["cells"] = math.inf
         return out
