@@ -443,3 +443,59 @@ def test_cell_list_cusp_on_a_close_pair_does_not_shrink_the_cutoff():
     got = _pair_field(eff, x, v, CellList(tol=1e-3), w)
     exact = _pair_field(eff, x, v, Dense(), w)
     assert np.linalg.norm(got - exact) <= 1e-3 * np.linalg.norm(exact)
+
+
+# ------------------------------------------------------------------ overlap of grid and pairs
+@given(nchunks=st.integers(0, 60), nthreads=st.integers(1, 4),
+       first=st.one_of(st.none(), st.floats(0.0, 1.0)))
+def test_chunk_shares_cover_every_chunk_once_and_give_thread_zero_its_fraction(nchunks,
+                                                                               nthreads,
+                                                                               first):
+    shares = _cells.chunk_shares(nchunks, nthreads, first)
+    flat = sorted(c for mine in shares for c in mine)
+    assert flat == list(range(nchunks))
+    assert len(shares) == max(1, min(nthreads, max(nchunks, 1)))
+    if first is None:
+        assert all(len(s) - len(shares[-1]) in (0, 1) for s in shares)   # interleaved
+    elif len(shares) > 1:
+        assert abs(len(shares[0]) - first * nchunks) <= 1.0
+    assert shares == _cells.chunk_shares(nchunks, nthreads, first)      # fixed by the counts
+
+
+def test_overlap_share_balances_the_transforms_against_the_pairs():
+    from types import SimpleNamespace
+
+    from kinred.pairsum.nufft import overlap_share
+
+    sp = SimpleNamespace(near_seconds=0.105, grid_seconds=0.062)
+    # G + x·P = (1 − x)·P on two threads: x = (P − G)/(2P)
+    assert overlap_share(sp, 2, 1) == pytest.approx((0.105 - 0.062) / 0.21)
+    assert overlap_share(sp, 4, 1) == 0.0                    # 3·G > P: the pairs go elsewhere
+    assert overlap_share(SimpleNamespace(near_seconds=1.0, grid_seconds=0.0), 2, 1) == 0.5
+    assert overlap_share(sp, 1, 1) is None and overlap_share(sp, 2, 2) is None
+
+
+def test_nufft_with_overlap_equals_the_sequential_sums_and_repeats_bitwise(monkeypatch):
+    """The transforms overlap the other thread's near pairs (finufft on one thread below 10⁵
+    points): the same sums as one after the other, to round-off, and the same bits on every
+    call (the chunks' shares are fixed by the counts)."""
+    from kinred._parallel import num_threads
+    from kinred.pairsum import nufft
+
+    rng = np.random.default_rng(5)
+    th = rng.uniform(0, 2 * np.pi, 4000)
+    x = np.c_[5 * np.cos(th), 5 * np.sin(th)] + 0.1 * rng.normal(size=(4000, 2)) + 50.0
+    v = rng.normal(size=(4000, 2))
+    eff = [AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.5, soft=0.1))]
+    with num_threads(2):
+        sc = Scene(eff, pairsum=NUFFT(tol=1e-6, near_field=True))
+        got = sc.rhs(x, v)[1]
+        g = next(iter(sc._plans.values())).groups[0]
+        share = nufft.overlap_share(g.split, 2, g.fast.nthreads)
+        assert share is not None and 0.0 <= share <= 0.5
+        assert np.array_equal(sc.rhs(x, v)[1], got)
+        monkeypatch.setattr(nufft, "overlap_share", lambda *a: None)
+        seq = sc.rhs(x, v)[1]
+    assert np.abs(got - seq).max() <= 1e-13 * np.abs(seq).max()
+    exact = Scene(eff).rhs(x, v)[1]
+    assert np.linalg.norm(got - exact) <= 1e-6 * np.linalg.norm(exact)

@@ -140,12 +140,28 @@ def _items(count: np.ndarray, rowbound: np.ndarray, chunk: int) -> tuple:
     return chunks, int(max(chunk, per.max())) + 1, int(bound.sum())
 
 
+def chunk_shares(nchunks: int, nthreads: int, first=None) -> list:
+    """The chunks (indices) of each thread: interleaved (chunk ``c`` to thread
+    ``c mod nthreads``, neighbouring cells cost alike), or with ``first`` the fraction
+    ``first`` of them spread evenly to thread 0 and the rest interleaved over the others
+    (thread 0 has other work first). Fixed by the counts alone: the same threads get the
+    same chunks on every call, so the sums are reproducible."""
+    nthreads = max(1, min(nthreads, max(nchunks, 1)))
+    if first is None or nthreads == 1:
+        return [list(range(g, nchunks, nthreads)) for g in range(nthreads)]
+    first = min(max(float(first), 0.0), 1.0)
+    c = np.arange(nchunks)
+    zero = np.floor((c + 1) * first) > np.floor(c * first)
+    rest = c[~zero]
+    return [c[zero].tolist()] + [rest[g::nthreads - 1].tolist() for g in range(nthreads - 1)]
+
+
 _NO_SPLIT = np.zeros(5)
 _NO_TABLE = np.zeros((1, 4))
 
 
 def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
-               compiled: bool = True) -> tuple:
+               compiled: bool = True, side=None, side_share: float = 0.0) -> tuple:
     """The pair sums of the grid's pairs: per thread an ``(nacc, N, d + 1)`` array (sorted
     order) ``A[a, i] += Σ_j φ_t(|sᵢ − sⱼ|) Z_t[j]`` over the terms ``t`` of ``evals``.
 
@@ -157,6 +173,11 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
     Zs : list of (N, d + 1) ndarray
         The carriers ``[c z, c]`` in sorted order.
 
+    side : callable, optional
+        Other work (e.g. the NUFFT's transforms) run by the calling thread before its
+        chunks, overlapping the other threads' pairs; that thread then takes only the
+        fraction ``side_share`` of the chunks (:func:`shares`).
+
     Returns
     -------
     (accs, pairs)
@@ -166,13 +187,22 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
     d1 = Zs[0].shape[1] if Zs else 1
     gather = _cell_kernels.gather_pairs if compiled else _cell_kernels.gather_pairs_numpy
     scatter = _cell_kernels.scatter_pairs if compiled else _cell_kernels.scatter_pairs_numpy
-    nthreads = max(1, min(nthreads, len(grid.chunks)))
-    shares = [grid.chunks[g::nthreads] for g in range(nthreads)]
+    shares = chunk_shares(len(grid.chunks), nthreads, None if side is None else side_share)
+    shares = [[grid.chunks[c] for c in mine] for mine in shares]
+    if side is not None:
+        shares[0] = (side, shares[0])
+
+    def unpack(g, mine):
+        if g == 0 and side is not None:
+            mine[0]()
+            return mine[1]
+        return mine
 
     fused = compiled and all(getattr(fn, "fused", None) is not None
                              or getattr(fn, "table", None) is not None for fn, _, _ in evals)
 
     def work_fused(g, mine):
+        mine = unpack(g, mine)
         A = np.zeros((nacc, n, d1))
         pairs = 0
         for fn, z, a in evals:
@@ -191,6 +221,7 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
         return A, pairs // max(1, len(evals))
 
     def work(g, mine):
+        mine = unpack(g, mine)
         A = np.zeros((nacc, n, d1))
         oi = np.empty(grid.buffer, dtype=np.int64)
         oj = np.empty(grid.buffer, dtype=np.int64)

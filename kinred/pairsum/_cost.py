@@ -31,10 +31,12 @@ CELL_CANDIDATES = {1: 1.5, 2: 2.9, 3: 6.5}
 #: issue 24 (radius 20, N = 2·10⁴, cutoff 1.8, one thread): 22 ns per pair for Morse, 56 ns
 #: for its near part with the transition's ``erfc``. By the tables, search and accumulation
 #: included: 10.9 ns per pair and thread for Morse (2-D, D = 300, N = 10⁵, cutoff 19.2,
-#: 6.1·10⁷ pairs; 18.3 ns by its closed form), 9–13 ns per near pair and thread (the ring
-#: of radius 5, N = 2·10⁴, ε_I = 0.94: 1.18·10⁷ pairs in 55–77 ms wall on 2 threads).
+#: 6.1·10⁷ pairs; 18.3 ns by its closed form), 9.4 ns per near pair and thread, candidates
+#: included (the ring of radius 5, N = 2·10⁴, ε_I = 0.94: 1.18·10⁷ pairs in 107 ms on one
+#: thread). It was priced at 18 ns, and the far grid at twice its time (at finufft's
+#: ``ε = tol·τ`` instead of its own): the errors cancelled on that ring, not on others.
 FUSED_PAIR_SECONDS = 1.1e-8
-FUSED_NEAR_PAIR_SECONDS = 1.2e-8
+FUSED_NEAR_PAIR_SECONDS = 3.6e-9
 FUSED_CANDIDATE_SECONDS = 2e-9
 #: NUFFT: seconds per spreading operation and per FFT point and ``log₂``.
 SPREAD_SECONDS = 1e-9

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.special import erfc, erfcinv
@@ -59,6 +60,9 @@ class Split:
     grid: _fastsum.Grid
     near: object          # q ↦ φ_N(√q) (fresh array)
     tau: float
+    #: Estimated seconds on one thread of the near pairs and of the grid's transforms.
+    near_seconds: float = 0.0
+    grid_seconds: float = 0.0
 
 
 def _transition(eps_i: float, tau: float):
@@ -129,10 +133,25 @@ def _tau(phi, eps_i, dmax, tol, kappa, name):
                                                                           kappa)))
 
 
+class _Rung(NamedTuple):
+    """One radius of the ladder: estimated seconds (one thread; ``inf`` for a grid estimated
+    beyond ``max_modes``), of which the near pairs' ``near``; ``φ_F``, its accuracy scale
+    ``κ_F`` and sup ``‖φ_F‖∞``."""
+
+    cost: float
+    eps_i: float
+    tau: float
+    phi_f: object
+    kappa: float
+    kinf: float
+    near: float
+
+
 def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim) -> list:
-    """The ladder's radii by estimated cost: ``(seconds, ε_I, τ, φ_F, κ_F)``, cheapest first
-    (``inf`` for a grid estimated beyond ``max_modes``); the near pairs at the compiled pass's
-    cost of a tabulated near part (:func:`near_kernel`)."""
+    """The ladder's radii as :class:`_Rung`, cheapest first: the near pairs at the compiled
+    pass's cost of a tabulated near part (:func:`near_kernel`), the far grid's transforms at
+    the finufft ``ε`` it will get (``_fastsum.finufft_eps`` of ``κ_F`` and ``‖φ_F‖∞``; it
+    was priced at ``tol·τ``, which finufft's widths cap, and a grid cost twice its price)."""
     n, k = s.shape
     dmax = float(np.sqrt(np.sum(ext * ext)))
     ladder = [1.0] if dmax == 0.0 else [dmax * 2.0 ** -j for j in LADDER]
@@ -143,18 +162,22 @@ def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim) -> list:
         frac = float(np.mean(dist < eps_i)) if dist.size else 0.0
         kap = _far_kappa(phi, dist, eps_i, kappa, name)
         tau = _tau(phi, eps_i, dmax, tol, kap, name)
+        phi_f = far_profile(phi, eps_i, tau)
+        kinf = max(float(np.max(np.abs(_fastsum._profile(phi_f, np.linspace(0.0, dmax, 4097),
+                                                           name)))), kap)
         modes = _modes_estimate(eps_i, tau, ext, tol, max_modes)
-        cost = _cost.cell_seconds(frac * npairs, k, fused=True, near=True) + (
-            _cost.nufft_seconds(n, dim, modes, tol * tau, k) if modes else math.inf)
-        ranked.append((cost, eps_i, tau, far_profile(phi, eps_i, tau), kap))
-    ranked.sort(key=lambda r: r[0])
+        near = _cost.cell_seconds(frac * npairs, k, fused=True, near=True)
+        cost = near + (_cost.nufft_seconds(n, dim, modes, _fastsum.finufft_eps(tol, kap, kinf),
+                                           k) if modes else math.inf)
+        ranked.append(_Rung(cost, eps_i, tau, phi_f, kap, kinf, near))
+    ranked.sort(key=lambda r: r.cost)
     return ranked
 
 
 def estimate(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa: float,
              max_modes: int, name: str, dim: int) -> float:
     """The estimated seconds of the cheapest radius of the ladder (no grid built)."""
-    return _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0][0]
+    return _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0].cost
 
 
 def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kinf: float,
@@ -168,7 +191,7 @@ def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float
     if single is None:
         return True
     eps = _fastsum.finufft_eps(tol, kappa, kinf)
-    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0][0]
+    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0].cost
     return best < _cost.nufft_seconds(n, dim, single, eps, k)
 
 
@@ -184,18 +207,18 @@ def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa
     dmax = float(np.sqrt(np.sum(ext * ext)))
     ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)
     last = None
-    for cost, eps_i, tau, phi_f, kap in [r for r in ranked if math.isfinite(r[0])][:TRIES]:
-        kinf_f = float(np.max(np.abs(_fastsum._profile(phi_f, np.linspace(0.0, dmax, 4097),
-                                                        name))))
+    for r in [r for r in ranked if math.isfinite(r.cost)][:TRIES]:
         try:
-            grid = _fastsum.build_grid(phi_f, ext, tol, max(kinf_f, kap), kap, max_modes,
-                                       f"the far part (outside {eps_i:.3g}) of {name}",
-                                       xi_min=1.0 / _sigma(eps_i, tau))
+            grid = _fastsum.build_grid(r.phi_f, ext, tol, r.kinf, r.kappa, max_modes,
+                                       f"the far part (outside {r.eps_i:.3g}) of {name}",
+                                       xi_min=1.0 / _sigma(r.eps_i, r.tau))
         except TooLarge as exc:
             last = exc
             continue
-        return Split(eps_i, grid, near_kernel(kernels, phi_f, _table.TABLE_FACTOR * tol,
-                                              kap), tau)
+        return Split(r.eps_i, grid, near_kernel(kernels, r.phi_f, _table.TABLE_FACTOR * tol,
+                                                r.kappa), r.tau, r.near,
+                     _cost.nufft_seconds(s.shape[0], dim, math.prod(grid.modes), grid.eps,
+                                         s.shape[1]))
     raise TooLarge(f"NUFFT with a near-field split: no near radius of the ladder {LADDER[0]}"
                    f"..{LADDER[-1]} halvings of the diameter {dmax:.4g} gives a grid of the far "
                    f"part of {name} within max_modes={max_modes} at tol={tol:g}"

@@ -267,10 +267,13 @@ def kernel_values(kernel):
     return values
 
 
-def near_sums(s: np.ndarray, R: float, terms: list, compiled: bool = True, record=None):
+def near_sums(s: np.ndarray, R: float, terms: list, compiled: bool = True, record=None,
+              side=None, side_share: float = 0.0):
     """Add ``Σ_{j: |sᵢ−sⱼ|<R} φ_t(|sᵢ − sⱼ|) Z_t[j]`` to ``A_t[i]`` for the terms
     ``(q ↦ φ_t(√q), Z_t (n, d+1), A_t (n, d+1))`` (original order); ``record`` (if given)
-    gets ``.pairs`` and ``.cells``. Returns the number of pairs within ``R``."""
+    gets ``.pairs`` and ``.cells``; ``side``: other work the calling thread does first,
+    overlapping the other threads' pairs, then the fraction ``side_share`` of the pairs
+    (``_cells.accumulate``). Returns the number of pairs within ``R``."""
     grid = _cells.build(s, R)
     zs, accs, evals = [], [], []
     for kern, Z, A in terms:
@@ -285,7 +288,7 @@ def near_sums(s: np.ndarray, R: float, terms: list, compiled: bool = True, recor
             ai = len(accs) - 1
         evals.append((fn, zi, ai))
     parts, pairs = _cells.accumulate(grid, evals, [z[1] for z in zs], len(accs),
-                                     _parallel.get_num_threads(), compiled)
+                                     _parallel.get_num_threads(), compiled, side, side_share)
     total = parts[0]
     for p in parts[1:]:
         total += p

@@ -396,16 +396,42 @@ def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
         g.fast = None                        # release the old plan's memory first
         g.fast = _fastsum.FastSum(grid, n, strengths.shape[0], plan.nthreads)
         g.plans += 1
-    F = g.fast.apply(grid, s, 0.5 * (lo + hi), strengths)
-    sums = np.empty((d + 1, n))
-    sums[0::2] = F.real[: (d + 2) // 2]
-    sums[1::2] = F.imag[: (d + 1) // 2]
-    if g.split is not None:                  # the near part, pair by pair
+    centre = 0.5 * (lo + hi)
+    A = None
+    if g.split is None:
+        F = g.fast.apply(grid, s, centre, strengths)
+    else:                                    # the near part, pair by pair
         zext = np.empty((n, d + 1))
         np.multiply(zt, plan.c[:, None], out=zext[:, :d])
         zext[:, d] = plan.c
         A = np.zeros((n, d + 1))
-        g.near_pairs = near_sums(np.ascontiguousarray(s, dtype=np.float64), g.split.radius,
-                                 [(g.split.near, zext, A)])
+        got = []
+        share = overlap_share(g.split, plan.nthreads, g.fast.nthreads)
+        if share is None:
+            got.append(g.fast.apply(grid, s, centre, strengths))
+        g.near_pairs = near_sums(
+            np.ascontiguousarray(s, dtype=np.float64), g.split.radius,
+            [(g.split.near, zext, A)], side_share=share,
+            side=None if share is None else lambda: got.append(
+                g.fast.apply(grid, s, centre, strengths)))
+        F = got[0]
+    sums = np.empty((d + 1, n))
+    sums[0::2] = F.real[: (d + 2) // 2]
+    sums[1::2] = F.imag[: (d + 1) // 2]
+    if A is not None:
         sums += A.T
     return sums[:d].T - sums[d][:, None] * zt
+
+
+def overlap_share(split, nthreads: int, fft_threads: int) -> float | None:
+    """The fraction of the near pairs the calling thread sums after running the transforms
+    while the other threads sum the rest (None: no overlap – one engine thread, or finufft
+    already on several threads). Balances the estimates (``split.grid_seconds`` of the
+    transforms, ``split.near_seconds`` of the pairs, one thread each):
+    ``G + x·P = (1 − x)·P/(T − 1)``, clipped to ``[0, 1/T]``."""
+    if nthreads < 2 or fft_threads > 1:
+        return None
+    P, G = split.near_seconds, split.grid_seconds
+    if not P > 0:
+        return 0.0
+    return min(max((P - (nthreads - 1) * G) / (nthreads * P), 0.0), 1.0 / nthreads)
