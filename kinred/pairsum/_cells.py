@@ -172,11 +172,10 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
         of its carrier in ``Zs`` and of its accumulator.
     Zs : list of (N, d + 1) ndarray
         The carriers ``[c z, c]`` in sorted order.
-
     side : callable, optional
         Other work (e.g. the NUFFT's transforms) run by the calling thread before its
         chunks, overlapping the other threads' pairs; that thread then takes only the
-        fraction ``side_share`` of the chunks (:func:`shares`).
+        fraction ``side_share`` of the chunks (:func:`chunk_shares`).
 
     Returns
     -------
@@ -187,22 +186,18 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
     d1 = Zs[0].shape[1] if Zs else 1
     gather = _cell_kernels.gather_pairs if compiled else _cell_kernels.gather_pairs_numpy
     scatter = _cell_kernels.scatter_pairs if compiled else _cell_kernels.scatter_pairs_numpy
-    shares = chunk_shares(len(grid.chunks), nthreads, None if side is None else side_share)
-    shares = [[grid.chunks[c] for c in mine] for mine in shares]
-    if side is not None:
-        shares[0] = (side, shares[0])
+    shares = [[grid.chunks[c] for c in mine] for mine in
+              chunk_shares(len(grid.chunks), nthreads, None if side is None else side_share)]
 
-    def unpack(g, mine):
+    def side_first(g):
         if g == 0 and side is not None:
-            mine[0]()
-            return mine[1]
-        return mine
+            side()
 
     fused = compiled and all(getattr(fn, "fused", None) is not None
                              or getattr(fn, "table", None) is not None for fn, _, _ in evals)
 
     def work_fused(g, mine):
-        mine = unpack(g, mine)
+        side_first(g)
         A = np.zeros((nacc, n, d1))
         pairs = 0
         for fn, z, a in evals:
@@ -221,7 +216,7 @@ def accumulate(grid: CellGrid, evals: list, Zs: list, nacc: int, nthreads: int,
         return A, pairs // max(1, len(evals))
 
     def work(g, mine):
-        mine = unpack(g, mine)
+        side_first(g)
         A = np.zeros((nacc, n, d1))
         oi = np.empty(grid.buffer, dtype=np.int64)
         oj = np.empty(grid.buffer, dtype=np.int64)
