@@ -69,7 +69,7 @@ def test_screenshot_command(report, tmp_path):
     shot = tmp_path / "top.png"
     p = subprocess.run([sys.executable, "-m", "kinred.report.screenshot", str(report),
                         "--out", str(shot), "--width", "1000", "--height", "700"],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert png_size(shot.read_bytes()) == (1000, 700)
     assert p.stdout.strip() == f"screenshot: {shot} (1000 x 700 px)"
@@ -81,3 +81,37 @@ def test_screenshot_errors_are_one_line(tmp_path, capsys):
     assert main([str(tmp_path / "missing.html"), "--out", str(tmp_path / "s.png")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("kinred: error: InvalidInput: page") and err.count("\n") == 1
+
+
+def _fake_browser(tmp_path, body):
+    exe = tmp_path / "fake-chromium"
+    exe.write_text("#!/bin/sh\n" + body)
+    exe.chmod(0o755)
+    return str(exe)
+
+
+def test_a_helper_holding_the_output_does_not_stall_the_run(tmp_path, monkeypatch):
+    """The browser exits while a helper it started keeps the inherited stdout open (as a
+    crashpad handler can): the run returns when the browser exits, and the helper is killed."""
+    import time
+    from kinred.report._browser import _run
+
+    monkeypatch.setenv("CHROMIUM", _fake_browser(tmp_path, "sleep 60 &\necho page-dom\n"))
+    t0 = time.perf_counter()
+    p = _run(["--dump-dom", "x"], timeout=30)
+    assert time.perf_counter() - t0 < 15
+    assert p.returncode == 0 and p.stdout.strip() == "page-dom"
+
+
+def test_a_hung_browser_is_retried_once_then_named(tmp_path, monkeypatch):
+    from kinred.report._browser import BrowserFailed, _run
+
+    mark = tmp_path / "tried"
+    # hangs on the first call only
+    monkeypatch.setenv("CHROMIUM", _fake_browser(
+        tmp_path, f"if [ ! -e {mark} ]; then touch {mark}; sleep 60; fi\necho second\n"))
+    p = _run(["--dump-dom", "x"], timeout=1.0)
+    assert p.stdout.strip() == "second" and mark.exists()
+    monkeypatch.setenv("CHROMIUM", _fake_browser(tmp_path, "sleep 60\n"))
+    with pytest.raises(BrowserFailed, match=r"within 1 s \(2 attempts\): --dump-dom x"):
+        _run(["--dump-dom", "x"], timeout=1.0)

@@ -18,6 +18,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 from pathlib import Path
@@ -61,8 +62,33 @@ def _page(path) -> Path:
     return p.resolve()
 
 
-def _run(args: list, timeout: float) -> subprocess.CompletedProcess:
+def _run(args: list, timeout: float, attempts: int = 2) -> subprocess.CompletedProcess:
+    """Run Chromium with ``args``; the result's ``stdout``/``stderr`` are text.
+
+    Chromium's output goes to files, not pipes, and only the browser process is waited for:
+    a helper it leaves behind (crashpad handler, zygote) that still holds an inherited pipe
+    would otherwise keep ``communicate`` waiting until the timeout although the work is done.
+    Each attempt runs in its own process group, killed whole when the browser has exited or
+    timed out. A timed-out attempt (a headless browser can hang on a loaded machine) is
+    retried once with a fresh profile before :class:`BrowserFailed` is raised.
+    """
     exe = find_chromium()
+    last = ""
+    for _ in range(attempts):
+        p = _run_once(exe, args, timeout)
+        if p is not None:
+            break
+        last = f"chromium did not finish within {timeout:g} s ({attempts} attempts): "
+    else:
+        raise BrowserFailed(last + " ".join(args))
+    if p.returncode != 0:
+        raise BrowserFailed(f"chromium exited with status {p.returncode}: "
+                            f"{p.stderr.strip()[-500:]}")
+    return p
+
+
+def _run_once(exe: str, args: list, timeout: float):
+    """One Chromium run; its CompletedProcess, or None when it did not exit within timeout."""
     with tempfile.TemporaryDirectory(prefix="kinred-chromium-") as profile:
         # --test-type: no "unsupported flag" info bar over the page; compositor stages run
         # before the screenshot is taken (else a loaded machine can leave tiles unpainted)
@@ -70,18 +96,38 @@ def _run(args: list, timeout: float) -> subprocess.CompletedProcess:
         # load must not wait on (or be slowed by) refused connections
         cmd = [exe, "--headless", "--disable-gpu", "--no-sandbox", "--test-type",
                "--disable-background-networking", "--disable-component-update",
-               "--disable-sync", "--disable-quic",
+               "--disable-sync", "--disable-quic", "--disable-breakpad",
                "--hide-scrollbars", "--no-first-run", "--disable-extensions", "--mute-audio",
                "--run-all-compositor-stages-before-draw", f"--user-data-dir={profile}", *args]
-        try:
-            p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-        except subprocess.TimeoutExpired:
-            raise BrowserFailed(f"chromium did not finish within {timeout:g} s: "
-                                f"{' '.join(args)}") from None
-    if p.returncode != 0:
-        raise BrowserFailed(f"chromium exited with status {p.returncode}: "
-                            f"{p.stderr.strip()[-500:]}")
-    return p
+        out_path, err_path = Path(profile) / "stdout.txt", Path(profile) / "stderr.txt"
+        with open(out_path, "w+b") as out, open(err_path, "w+b") as err:
+            proc = subprocess.Popen(cmd, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                                    start_new_session=True)
+            try:
+                code = proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                code = None
+            finally:
+                _kill_group(proc)
+            if code is None:
+                return None
+            out.seek(0)
+            err.seek(0)
+            stdout = out.read().decode("utf-8", "replace")
+            stderr = err.read().decode("utf-8", "replace")
+    return subprocess.CompletedProcess(cmd, code, stdout, stderr)
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """Kill the process group of ``proc`` (the browser and every helper it started)."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:  # pragma: no cover - a process that ignores SIGKILL
+        pass
 
 
 #: Runs in the page on ``load``: opens every ``<details>`` (when asked), then measures.
