@@ -323,7 +323,8 @@ def test_kinred_certify_prints_verdicts_and_resumes(tmp_path, main, capsys):
     s = json.loads((out / "summary.json").read_text())
     assert all(r["cert_valid"] and r["cert_ratio_max"] <= 10 for r in s["per_k"].values())
     # --resume loads every stage and prints the same numbers; --norm picks what is printed
-    assert main(["certify", str(scene), "--out", str(out), "--resume", "--norm", "rms"]) == 0
+    assert main(["certify", str(scene), "--out", str(out), "--resume", "--norm", "rms",
+                 "--no-figures"]) == 0
     again = capsys.readouterr().out
     assert "solve: loaded, k1: loaded, k2: loaded" in again
     assert "max error over atoms" not in again
@@ -332,7 +333,7 @@ def test_kinred_certify_prints_verdicts_and_resumes(tmp_path, main, capsys):
     assert verdicts == [ln for ln in again.splitlines() if re.match(r"k=\d+: ", ln)]
     # without --resume the previous run is replaced (said in one line); a scene it cannot
     # certify: status 2, no work
-    assert main(["certify", str(scene), "--out", str(out)]) == 0
+    assert main(["certify", str(scene), "--out", str(out), "--no-figures"]) == 0
     assert "replacing the previous run" in capsys.readouterr().out
     bad = tmp_path / "rk4.toml"
     bad.write_text(textwrap.dedent(SCENE).replace("dt = 0.05", 'method = "rk4"\ndt = 0.05'))
@@ -347,7 +348,7 @@ def test_scene_file_certify_table_through_kinred_run(tmp_path, monkeypatch, caps
     scene.write_text(textwrap.dedent(SCENE) + "\n[certify]\nenabled = true\nnorm = \"rms\"\n")
     if "kinred.commands.run" not in cli.COMMAND_MODULES:
         monkeypatch.setattr(cli, "COMMAND_MODULES", cli.COMMAND_MODULES + ("kinred.commands.run",))
-    assert cli.main(["run", str(scene), "--out", str(tmp_path / "o")]) == 0
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "o"), "--no-figures"]) == 0
     printed = capsys.readouterr().out
     assert "W1(T) certified bound" in printed and "not certified" not in printed
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
@@ -359,11 +360,11 @@ def test_old_k_stage_files_are_recomputed(tmp_path):
 
     cfg = _small()
     out = tmp_path / "o"
-    kinetic_run.run(cfg, out_dir=out, progress=False)
+    kinetic_run.run(cfg, out_dir=out, progress=False, figures=False)
     stage = out / "stages" / "k1.npz"
     old = {k: v for k, v in read_npz(stage).items() if k not in kinetic_certify.CERT_KEYS}
     atomic_write_npz(stage, old)                        # a k stage written before issue 16
     with pytest.warns(KinredWarning, match=r"k1\.npz"):
-        res = kinetic_run.run(cfg, out_dir=out, resume=True, progress=False)
+        res = kinetic_run.run(cfg, out_dir=out, resume=True, progress=False, figures=False)
     assert res.stages == {"solve": "loaded", "k1": "computed", "k2": "loaded"}
     assert str(res.per_k[1]["cert_note"]).startswith("certified")

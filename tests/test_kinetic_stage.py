@@ -24,8 +24,8 @@ def scene():
 def runs(scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "out"
     memory = kinetic_run.run(scene)
-    first = kinetic_run.run(scene, out_dir=out)
-    resumed = kinetic_run.run(scene, out_dir=out, resume=True)
+    first = kinetic_run.run(scene, out_dir=out, figures=False)
+    resumed = kinetic_run.run(scene, out_dir=out, resume=True, figures=False)
     return memory, first, resumed, out
 
 

@@ -78,7 +78,8 @@ def clean_run(tmp_path_factory):
                 if "kinred.commands.run" not in cli.COMMAND_MODULES:
                     mp.setattr(cli, "COMMAND_MODULES",
                                cli.COMMAND_MODULES + ("kinred.commands.run",))
-                assert cli.main(["run", str(scene), "--out", str(out), "--no-progress"]) == 0
+                assert cli.main(["run", str(scene), "--out", str(out), "--no-progress",
+                                 "--no-figures"]) == 0
             runs[name, seed] = out
         return runs[name, seed]
 
@@ -224,7 +225,7 @@ def _numbers(folder):
 def test_two_runs_into_one_folder(tmp_path, main, capsys, clean_run):
     a_scene, b_scene = _scene(tmp_path, "A.toml", 1), _scene(tmp_path, "B.toml", 2)
     out, go = tmp_path / "R", tmp_path / "go"
-    args = ["run", str(a_scene), "--out", str(out), "--no-progress"]
+    args = ["run", str(a_scene), "--out", str(out), "--no-progress", "--no-figures"]
     a = _child(_PAUSED_RUN.replace("GO", repr(str(go))).replace("ARGS", repr(args)))
     try:
         line = a.stdout.readline()
@@ -234,7 +235,8 @@ def test_two_runs_into_one_folder(tmp_path, main, capsys, clean_run):
         before = {f: (out / f).read_bytes() for f in _files(out) if (out / f).is_file()}
         assert "stages/solve.npz" in before
         # B, differing only in projection.seed, while A runs: refused in one line, R untouched
-        assert main(["run", str(b_scene), "--out", str(out), "--no-progress"]) == 2
+        assert main(["run", str(b_scene), "--out", str(out), "--no-progress",
+                     "--no-figures"]) == 2
         captured = capsys.readouterr()
         err = captured.err.strip()
         assert len(err.splitlines()) == 1 and "replacing" not in captured.out
@@ -250,7 +252,8 @@ def test_two_runs_into_one_folder(tmp_path, main, capsys, clean_run):
     a_numbers = _numbers(out)
     assert set(a_summary["stages"].values()) == {"computed"}
     # B after A finished: replaces A's run, loads nothing, and its numbers are its own
-    assert main(["run", str(b_scene), "--out", str(out), "--no-progress"]) == 0
+    assert main(["run", str(b_scene), "--out", str(out), "--no-progress",
+                 "--no-figures"]) == 0
     printed = capsys.readouterr().out
     assert printed.startswith(f"kinred run: replacing the previous run in {out}")
     assert "loaded" not in printed
@@ -273,12 +276,13 @@ def test_kinetic_run_api_owns_its_folder(tmp_path):
     p = _holder(tmp_path / "R")
     try:
         with pytest.raises(FolderInUse, match=f"pid {p.pid}"):
-            kinetic_run.run(cfg, out_dir=tmp_path / "R")
+            kinetic_run.run(cfg, out_dir=tmp_path / "R", figures=False)
         assert _files(tmp_path / "R") == [LOCK_NAME]
     finally:
         p.kill()
         p.wait()
-    res = kinetic_run.run(cfg, out_dir=tmp_path / "R")        # the stale lock is taken over
+    # the stale lock is taken over
+    res = kinetic_run.run(cfg, out_dir=tmp_path / "R", figures=False)
     assert set(res.stages.values()) == {"computed"}
     assert not (tmp_path / "R" / LOCK_NAME).exists()
 
@@ -325,7 +329,8 @@ def test_a_full_disk_in_a_command_is_one_line(tmp_path, monkeypatch, main, capsy
         return real(fd)
 
     monkeypatch.setattr(os, "fsync", fsync)
-    assert main(["run", str(scene), "--out", str(tmp_path / "R"), "--no-progress"]) == 2
+    assert main(["run", str(scene), "--out", str(tmp_path / "R"), "--no-progress",
+                 "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert err.startswith("kinred: error: DiskFull: ") and "no space left on device" in err
@@ -369,7 +374,7 @@ def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys, 
     assert "kinred certify s.toml" in captured.err and "kinred run" not in captured.err
     # the shared numbers are those certify computes by itself, bit for bit
     assert cli.main(["certify", str(scene), "--out", "alone", "--from-run", "nowhere",
-                     "--no-progress"]) == 0
+                     "--no-progress", "--no-figures"]) == 0
     assert calls == ["_solve_stage", "_k_stage", "_k_stage"]
     alone, shared = _numbers(tmp_path / "alone"), _numbers(tmp_path / "results" / "certify-s")
     assert alone.keys() == shared.keys() and "k2_cert_w1" in alone
@@ -380,7 +385,7 @@ def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys, 
     shutil.copytree(clean_run("B.toml", 2), tmp_path / "other-run")   # `kinred run` of seed 2
     del calls[:]
     assert cli.main(["certify", str(scene), "--out", "c2", "--from-run", "other-run",
-                     "--no-progress"]) == 0
+                     "--no-progress", "--no-figures"]) == 0
     assert calls == ["_solve_stage", "_k_stage", "_k_stage"]
     summary = json.loads((tmp_path / "c2" / "summary.json").read_text())
     assert set(summary["stages"].values()) == {"computed"}

@@ -215,7 +215,7 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
         assert (out / "stages" / n).read_bytes() == content[n]
     validate_report_html((out / "report.html").read_text())
     # the resumed run's numbers are those of an uninterrupted run, bit for bit
-    assert main(["run", str(scene), "--out", str(tmp_path / "clean")]) == 0
+    assert main(["run", str(scene), "--out", str(tmp_path / "clean"), "--no-figures"]) == 0
     a, b = _arrays(tmp_path / "clean" / "results.npz"), _arrays(out / "results.npz")
     assert a.keys() == b.keys() and len(a) > 40
     for key in a:
@@ -228,7 +228,7 @@ def test_interrupt_and_resume(tmp_path, main, capsys):
     assert "different configuration" in err
     assert "StoreMismatch" in err and "differs: config.t_final" in err
     # without --resume the previous run is replaced, in one line, and computed afresh
-    assert main(["run", str(scene), "--out", str(out)]) == 0
+    assert main(["run", str(scene), "--out", str(out), "--no-figures"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == (f"kinred run: replacing the previous run in {out}; use --resume to "
                         "continue it")
@@ -243,7 +243,7 @@ def test_rerun_rule(tmp_path, main, capsys, base_run):
     scene.write_text(BASE)
     assert base_run[0] == 0 and "replacing" not in base_run[1]    # a first run into a new folder
     out = _copy_run(base_run, tmp_path / "out")                   # ... left this folder
-    assert main(["run", str(scene), "--out", str(out)]) == 0
+    assert main(["run", str(scene), "--out", str(out), "--no-figures"]) == 0
     assert capsys.readouterr().out.startswith(f"kinred run: replacing the previous run in {out};")
     (out / "notes.txt").write_text("mine")
     assert main(["run", str(scene), "--out", str(out)]) == 2
@@ -332,3 +332,27 @@ def test_stage_files_without_their_index_are_not_trusted(tmp_path, main, capsys,
     assert err == (f"kinred: error: StoreMismatch: {out / 'stages'} exists and is not a stage "
                    "store (no config.json); choose a new or empty directory")
     assert sorted(p.name for p in (out / "stages").iterdir()) == ["k1.npz", "solve.npz"]
+
+
+def test_no_figures_writes_the_same_numbers_and_a_note_per_figure(tmp_path, main, capsys,
+                                                                    base_run):
+    """``--no-figures``: the numbers of a full run bit for bit, no PNG, the report says per
+    figure why it is missing; a resumed run with it removes the PNGs of the earlier run."""
+    from kinred.experiments.kinetic_report import NOT_DRAWN
+
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(BASE)
+    out = tmp_path / "plain"
+    assert main(["run", str(scene), "--out", str(out), "--no-figures"]) == 0
+    full = base_run[2]
+    a, b = _arrays(full / "results.npz"), _arrays(out / "results.npz")
+    assert a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
+    assert not list(out.glob("*.png")) and len(list(full.glob("*.png"))) == 4
+    html = (out / "report.html").read_text()
+    assert validate_report_html(html) == 0 and html.count(NOT_DRAWN) == 4
+    resumed = _copy_run(base_run, tmp_path / "resumed")
+    assert main(["run", str(scene), "--out", str(resumed), "--resume", "--no-figures"]) == 0
+    assert not list(resumed.glob("*.png"))
+    assert (resumed / "report.html").read_text().count(NOT_DRAWN) == 4
+    assert main(["run", str(scene), "--out", str(resumed), "--resume"]) == 0   # drawn again
+    assert len(list(resumed.glob("*.png"))) == 4

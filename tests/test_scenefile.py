@@ -61,10 +61,12 @@ def _arrays(path):
 
 
 def _run(main, tmp_path, text, name, *extra):
+    """``kinred run`` of the scene ``text`` into ``tmp_path/name``; figures are not drawn
+    (this module checks numbers; test_run_cli.py and test_report_kinetic.py the figures)."""
     scene = tmp_path / f"{name}.toml"
     scene.write_text(text)
     out = tmp_path / name
-    assert main(["run", str(scene), "--out", str(out), *extra]) == 0
+    assert main(["run", str(scene), "--out", str(out), "--no-figures", *extra]) == 0
     return out
 
 
@@ -216,7 +218,8 @@ def test_random_batch_scene_is_reproducible_and_resumes_bit_identically(tmp_path
     assert not np.array_equal(a["gamma_high"], c["gamma_high"])          # the seed draws batches
     # a k stage recomputed from the loaded solve stage equals the one computed after solving
     (one / "stages" / "k2.npz").unlink()
-    assert main(["run", str(tmp_path / "one.toml"), "--out", str(one), "--resume"]) == 0
+    assert main(["run", str(tmp_path / "one.toml"), "--out", str(one), "--resume",
+                 "--no-figures"]) == 0
     summary = json.loads((one / "summary.json").read_text())
     assert summary["stages"] == {"solve": "loaded", "reference": "loaded", "k1": "loaded",
                                  "k2": "computed"}

@@ -252,7 +252,7 @@ def record(out, layout: Layout) -> None:
 def add_scene_arguments(parser, command: str) -> None:
     """The arguments every scene-file command shares (``kinred run``, ``kinred certify``):
     ``SCENE.toml``, ``--out`` (default ``results/<command>-<scene name>``), ``--resume``,
-    ``--smoke`` and ``--no-progress``."""
+    ``--smoke``, ``--no-progress`` and ``--no-figures``."""
     parser.add_argument("scene", metavar="SCENE.toml", help="scene file (see docs/scene-file.md)")
     parser.add_argument("--out", metavar="DIR",
                         help=f"result folder (default results/{command}-<scene name>; a previous "
@@ -263,3 +263,6 @@ def add_scene_arguments(parser, command: str) -> None:
                         help="tiny sizes from the scene's [smoke] table (seconds)")
     parser.add_argument("--no-progress", action="store_true",
                         help="hide the progress bar (shown on stderr when it is a terminal)")
+    parser.add_argument("--no-figures", action="store_true",
+                        help="write the report without drawing its figures (each is a note; "
+                             "about 2 s less per run, for sweeps that read summary.json)")

@@ -115,7 +115,8 @@ def run(args) -> int:
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume,
                              progress=False if args.no_progress else None,
                              label=f"kinred certify {Path(cfg.source).name}",
-                             share_from=source if source.resolve() != out.resolve() else None)
+                             share_from=source if source.resolve() != out.resolve() else None,
+                             figures=not args.no_figures)
     _output.record(out, layout)
     print(f"kinred certify: {cfg.title}: d = {cfg.d}, N = {result.n_atoms} atoms, "
           f"{cfg.method} dt = {cfg.dt:g}, T = {cfg.t_final:g}, k ∈ {list(cfg.ks)}")

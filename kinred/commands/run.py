@@ -1,4 +1,4 @@
-"""``kinred run SCENE.toml [--out DIR] [--resume] [--smoke]``: run a scene file.
+"""``kinred run SCENE.toml [--out DIR] [--resume] [--smoke] [--no-figures]``: run a scene file.
 
 Prints a header first -- the scene, d, the atom count N (and why it differs from the
 requested one), the quantization's a-priori bound ε, T, the step, the k's and the pair-sum
@@ -10,7 +10,8 @@ continues an interrupted run without recomputing finished stages; a damaged stag
 named in a warning and recomputed. Without ``--resume`` a previous ``kinred run`` in the
 folder is replaced (said in one line) and a folder holding other files is refused (the rule
 of :mod:`kinred.commands._output`). ``--smoke`` uses the scene's ``[smoke]`` sizes (tiny;
-what the tests run). Scene-file reference: ``docs/scene-file.md``.
+what the tests run). ``--no-figures`` writes the report without drawing its figures (a note
+in place of each). Scene-file reference: ``docs/scene-file.md``.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def run(args) -> int:
     _output.prepare(out, layout, resume=args.resume)
     print("\n".join(header), flush=True)
     result = kinetic_run.run(cfg, out_dir=out, resume=args.resume,
-                             progress=False if args.no_progress else None)
+                             progress=False if args.no_progress else None,
+                             figures=not args.no_figures)
     _output.record(out, layout)
     print(result.table().to_text())
     done = ", ".join(f"{k}: {v}" for k, v in result.stages.items())

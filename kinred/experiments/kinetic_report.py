@@ -300,9 +300,18 @@ def _cloud_axes(ax, pts, name, title):
         ax.set_aspect("equal", adjustable="datalim")
 
 
-def figures(result):
-    """The report's figures, each drawn in a guarded call (a list of DrawnFigure)."""
-    from ..report import draw_figure
+#: Why a figure of a run started with ``figures=False`` (``--no-figures``) has no PNG.
+NOT_DRAWN = "the run was asked not to draw figures (--no-figures)"
+
+
+def figures(result, *, draw: bool = True):
+    """The report's figures, each drawn in a guarded call (a list of DrawnFigure); with
+    ``draw=False`` none is drawn: each carries its caption and ``NOT_DRAWN`` as the reason."""
+    from ..report import DrawnFigure, draw_figure
+
+    if not draw:
+        def draw_figure(name, caption, make, *args):  # noqa: F811 - the no-figures twin
+            return DrawnFigure(name, caption, None, NOT_DRAWN)
 
     cfg, k0 = result.config, result.config.ks[0]
     ref = result.high.get("n_atoms_reference")
