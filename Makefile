@@ -34,8 +34,8 @@ demo: $(VENV)/.installed-base
 # says the command to run (kinred.report._browser.find_chromium is the one place that looks).
 test: $(VENV)/.installed-test chromium
 	@echo "make test: compiling the numba kernels (two processes; cached for the suite)"
-	@$(BIN)/python tests/_warm_kernels.py demo >/dev/null 2>&1 & pid=$$!; \
-	  $(BIN)/python tests/_warm_kernels.py fig4 >/dev/null 2>&1 || echo "$(WARM_FAILED)"; \
+	@$(BIN)/python tests/_warm_kernels.py demo w1 steps >/dev/null 2>&1 & pid=$$!; \
+	  $(BIN)/python tests/_warm_kernels.py fig4 twins >/dev/null 2>&1 || echo "$(WARM_FAILED)"; \
 	  wait $$pid || echo "$(WARM_FAILED)"
 	$(BIN)/python -m pytest -n auto --dist worksteal --durations=15
 
