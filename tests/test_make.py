@@ -41,6 +41,19 @@ def test_make_test_brings_chromium_and_uses_every_core():
     # the kernels are compiled once, in two processes, before pytest starts
     warm = [plan.index(f"tests/_warm_kernels.py {g}") for g in ("demo", "fig4")]
     assert max(warm) < plan.index("pytest -n auto")
+    assert "demo w1 steps" in plan and "fig4 twins" in plan
+
+
+def test_warm_up_twins_name_tests_that_exist():
+    """A renamed twin test would make the warm-up fail quietly (its failure is ignored)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("warm", ROOT / "tests" / "_warm_kernels.py")
+    warm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(warm)
+    for node in warm.TWINS:
+        path, name = node.split("::")
+        assert f"def {name}(" in (ROOT / path).read_text(), node
 
 
 def test_without_chromium_and_root_one_clear_line(tmp_path):
