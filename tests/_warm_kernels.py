@@ -37,20 +37,38 @@ def main(group: str) -> int:
 
 
 #: Tests that call compiled kernels directly, with the suite's argument types, beside their
-#: numpy twins (small and quick once compiled).
+#: numpy twins (small and quick once compiled; whole files where the kernels take many types).
 TWINS = ["tests/test_w1_assign.py::test_kernel_potentials_equal_the_numpy_twin",
          "tests/test_w1_auction.py::test_the_auction_equals_its_python_twin",
          "tests/test_w1_costscale.py::test_kernel_equals_its_python_twin",
          "tests/test_w1_repair.py::test_potentials_equal_the_numpy_twin",
          "tests/test_w1_sparse.py::test_tree_ctransform_equals_its_numpy_twin",
          "tests/test_integrate_fused.py::test_fused_kernels_give_the_sweep_sums",
-         "tests/test_pairsum_large.py::test_cell_kernels_against_numpy_twins"]
+         "tests/test_pairsum_large.py::test_cell_kernels_against_numpy_twins",
+         # every dtype and layout of the pair kernels, fused Euler loops and random batches
+         "tests/test_kernels.py", "tests/test_pairsum_strips.py",
+         "tests/test_integrate_fused.py", "tests/test_rbm_fused_step.py"]
 
 
 def _twins() -> int:
     import pytest
 
     return int(pytest.main(["-q", "-p", "no:cacheprovider", "-p", "no:xdist", *TWINS]))
+
+
+def _mixed_precision() -> None:
+    """The float32 kernels of ``precision="mixed"`` (differences path d ≤ 3, Gram path)."""
+    import numpy as np
+
+    from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
+
+    scenes = [[Alignment(CuckerSmale(0.8, 1.5))], [Alignment(CuckerSmale(0.8, 1.62))],
+              [AttractionRepulsion(Morse(soft=0.2)), Alignment(CuckerSmale(1.0, 0.5), on="v")]]
+    rng = np.random.default_rng(0)
+    for d in (2, 60):
+        x, v = rng.normal(size=(50, d)), rng.normal(size=(50, d))
+        for effects in scenes:
+            Scene(effects, "sum", precision="mixed").rhs(x, v)
 
 
 def _w1() -> int:
