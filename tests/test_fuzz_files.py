@@ -108,7 +108,7 @@ def _scene_checks(data, source="<scene>"):
     cfg.times()
 
 
-@settings(max_examples=900, **FUZZ)
+@settings(max_examples=600, **FUZZ)
 @given(case=mutated(SCENE_DATA, python_keys=True))
 # lift_to = 1e9: MemoryError in kinred.kinetic.lift (now TooLarge naming initial.lift_to)
 @example(case=({**SMALL_SCENE, "dynamics": {**SMALL_SCENE["dynamics"], "d": 10**9},

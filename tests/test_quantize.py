@@ -558,7 +558,7 @@ def _requests(draw):
     return tp.push(M), {"atoms": draw(st.integers(1, 20000))}
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=20, deadline=None)
 @given(_requests())
 def test_preflight_bytes_bound_the_traced_peaks(req):
     mu, kw = req
