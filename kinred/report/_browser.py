@@ -73,14 +73,13 @@ def _run(args: list, timeout: float, attempts: int = 2) -> subprocess.CompletedP
     retried once with a fresh profile before :class:`BrowserFailed` is raised.
     """
     exe = find_chromium()
-    last = ""
     for _ in range(attempts):
         p = _run_once(exe, args, timeout)
         if p is not None:
             break
-        last = f"chromium did not finish within {timeout:g} s ({attempts} attempts): "
     else:
-        raise BrowserFailed(last + " ".join(args))
+        raise BrowserFailed(f"chromium did not finish within {timeout:g} s ({attempts} "
+                            f"attempts): {' '.join(args)}")
     if p.returncode != 0:
         raise BrowserFailed(f"chromium exited with status {p.returncode}: "
                             f"{p.stderr.strip()[-500:]}")
@@ -99,8 +98,7 @@ def _run_once(exe: str, args: list, timeout: float):
                "--disable-sync", "--disable-quic", "--disable-breakpad",
                "--hide-scrollbars", "--no-first-run", "--disable-extensions", "--mute-audio",
                "--run-all-compositor-stages-before-draw", f"--user-data-dir={profile}", *args]
-        out_path, err_path = Path(profile) / "stdout.txt", Path(profile) / "stderr.txt"
-        with open(out_path, "w+b") as out, open(err_path, "w+b") as err:
+        with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
             proc = subprocess.Popen(cmd, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
                                     start_new_session=True)
             try:
