@@ -43,7 +43,6 @@ TWINS = ["tests/test_w1_assign.py::test_kernel_potentials_equal_the_numpy_twin",
          "tests/test_w1_costscale.py::test_kernel_equals_its_python_twin",
          "tests/test_w1_repair.py::test_potentials_equal_the_numpy_twin",
          "tests/test_w1_sparse.py::test_tree_ctransform_equals_its_numpy_twin",
-         "tests/test_integrate_fused.py::test_fused_kernels_give_the_sweep_sums",
          "tests/test_pairsum_large.py::test_cell_kernels_against_numpy_twins",
          # every dtype and layout of the pair kernels, fused Euler loops and random batches
          "tests/test_kernels.py", "tests/test_pairsum_strips.py",

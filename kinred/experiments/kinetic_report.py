@@ -309,9 +309,10 @@ def figures(result, *, draw: bool = True):
     ``draw=False`` none is drawn: each carries its caption and ``NOT_DRAWN`` as the reason."""
     from ..report import DrawnFigure, draw_figure
 
-    if not draw:
-        def draw_figure(name, caption, make, *args):  # noqa: F811 - the no-figures twin
-            return DrawnFigure(name, caption, None, NOT_DRAWN)
+    def not_drawn(name, caption, *_):
+        return DrawnFigure(name, caption, None, NOT_DRAWN)
+
+    figure = draw_figure if draw else not_drawn
 
     cfg, k0 = result.config, result.config.ks[0]
     ref = result.high.get("n_atoms_reference")
@@ -355,10 +356,10 @@ def figures(result, *, draw: bool = True):
              "two coordinates of y" + (" (a weighted histogram for k = 1)" if 1 in shown else "")
              + ", over the projected original Mx with the same M (grey). Marker area ∝ atom "
              "weight.")
-    return [draw_figure("w1_vs_time.png", w1_cap, _fig_w1, result),
-            draw_figure("bound.png", b_cap, _fig_bound, result),
-            draw_figure("observables.png", o_cap, _fig_observables, result),
-            draw_figure("positions_final.png", p_cap, _fig_positions, result)]
+    return [figure("w1_vs_time.png", w1_cap, _fig_w1, result),
+            figure("bound.png", b_cap, _fig_bound, result),
+            figure("observables.png", o_cap, _fig_observables, result),
+            figure("positions_final.png", p_cap, _fig_positions, result)]
 
 
 def vacuous_throughout(result) -> bool:
