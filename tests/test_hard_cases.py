@@ -308,7 +308,7 @@ def test_cli_resume_recomputes_damaged_stage_files(tmp_path, capsys, tiny_run):
     os.truncate(stages / "k2.npz", (stages / "k2.npz").stat().st_size // 2)
     os.truncate(stages / "solve.npz", 0)
     loaded_k1 = (stages / "k1.npz").read_bytes()
-    rc, _, err = _cli(["run", scene, "--out", out, "--resume"], capsys)
+    rc, _, err = _cli(["run", scene, "--out", out, "--resume", "--no-figures"], capsys)
     assert rc == 0, err
     warned = [line for line in err.splitlines() if line.startswith("kinred: warning: ")]
     assert len(warned) == 2, err

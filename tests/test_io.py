@@ -408,7 +408,7 @@ def test_every_store_refuses_the_same_way(tmp_path):
 
     def kinetic(path, seed, resume=False):
         cfg = config_from_dict({**SMALL_SCENE, "projection": {"k": [1], "seed": seed}})
-        kinetic_run.run(cfg, out_dir=path, resume=resume, progress=False)
+        kinetic_run.run(cfg, out_dir=path, resume=resume, progress=False, figures=False)
 
     def paper(path, seed, resume=False):
         cfg = table1.Table1Config.quick(N=8, d=4, n_projections=1, steps=10, record_every=10,

@@ -124,7 +124,7 @@ def test_every_array_has_a_label(demo_run, tmp_path):
     from kinred.io import ResultFolder
 
     folder = ResultFolder(tmp_path / "out")
-    kinetic_run.write_outputs(res, folder)
+    kinetic_run.write_outputs(res, folder, figures=False)
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert s["labels"] == {n: kinetic_run.LABELS[n] for n in names
                            if n not in kinetic_run.NOT_NUMBERS}

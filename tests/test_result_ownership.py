@@ -363,7 +363,7 @@ def test_certify_reuses_the_stages_of_kinred_run(tmp_path, monkeypatch, capsys, 
     calls = _counting(monkeypatch)
     capsys.readouterr()
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
-    assert cli.main(["certify", str(scene)]) == 0                  # → results/certify-s
+    assert cli.main(["certify", str(scene), "--no-figures"]) == 0  # → results/certify-s
     captured = capsys.readouterr()
     assert calls == []                                             # nothing recomputed
     summary = json.loads((tmp_path / "results" / "certify-s" / "summary.json").read_text())
