@@ -53,7 +53,7 @@ from ._inputs import Pts
 from ._oned import monotone_pieces
 from ._repair import certify_repaired
 from ._costs import dual_scale, first_per, pair_costs, plan_cost, plan_noise, sorted_unique
-from ._search import CTree, OutOfTime, ctransform, knn, use_tree
+from ._search import CTree, OutOfTime, _morton_order, ctransform, knn, use_tree
 
 __all__ = ["SparseOutcome", "sparse_w1", "BYTES_PER_EDGE", "DEFAULT_K", "DEFAULT_RTOL"]
 
@@ -115,6 +115,17 @@ def _coupling_edges(X, a, Y, b, paired: bool):
     th = principal_axis(pooled, pw)
     i, j, mass = monotone_pieces(X @ th, a, Y @ th, b)
     return i.astype(np.int64), j.astype(np.int64), mass
+
+
+def _spatial_order(X, a, Y, b, paired: bool):
+    """The atoms renumbered along the Z-order curve (the same permutation for both sides
+    when they are paired, so that ``i ↔ i`` stays the pairing). W1 does not depend on the
+    numbering; the cost scaling and the network simplex do, through memory: neighbours
+    numbered near each other share cache lines (10⁵ vs 8·10⁴ weighted atoms in ℝ⁶: the
+    cost scaling 28 s in the given order, 21 s in this one)."""
+    ox = _morton_order(X)
+    oy = ox if paired else _morton_order(Y)
+    return (np.ascontiguousarray(X[ox]), a[ox], np.ascontiguousarray(Y[oy]), b[oy])
 
 
 def _initial_keys(X, a, Y, b, k: int, paired: bool):
@@ -431,6 +442,8 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     X, a = np.ascontiguousarray(P.points[ka]), P.weights[ka]
     Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
     n, m, d = X.shape[0], Y.shape[0], X.shape[1]
+    if n * m > _ALL_PAIRS and not is_assignment(a, b):
+        X, a, Y, b = _spatial_order(X, a, Y, b, paired)
     budget = _Budget(max_iter, default_max_edges(n, m, k) if max_edges is None
                      else int(max_edges), max_seconds, max_bytes, t0)
     price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
