@@ -499,3 +499,33 @@ def test_the_path_does_not_depend_on_the_seed():
     z = np.concatenate([x, y]) - w @ np.concatenate([x, y])
     lam = axis @ (z.T @ (w[:, None] * z)) @ axis
     assert lam == pytest.approx(np.linalg.eigvalsh(z.T @ (w[:, None] * z))[-1], rel=1e-12)
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_the_value_does_not_depend_on_the_atoms_numbering(paired):
+    """The solver renumbers the atoms along the Z-order curve (cache locality); W1 does not
+    depend on the numbering, and paired atoms keep their pairing (one permutation for both
+    sides: with paired weights the identity coupling is the graph's feasible coupling). A
+    relabelled input gives the dense optimum again, to 1e-12."""
+    rng = np.random.default_rng(21)
+    n = 1200
+    x = rng.normal(size=(n, 4)) * [1.0, 1.0, 0.3, 0.3]
+    a = rng.random(n)
+    a /= a.sum()
+    if paired:
+        y, b = x + 0.01 * rng.normal(size=(n, 4)), a
+    else:
+        y, b = rng.normal(size=(900, 4)) + 0.05, rng.random(900)
+        b /= b.sum()
+    ref = _dense(x, a, y, b)
+    p = rng.permutation(n)
+    q = p if paired else rng.permutation(y.shape[0])
+    for xx, aa, yy, bb in ((x, a, y, b), (x[p], a[p], y[q], b[q])):
+        r = w1(xx, yy, "sparse", a=aa, b=bb, neighbors=4)
+        assert r.exact and r.value == pytest.approx(ref, rel=1e-12)
+    # the renumbering keeps the pairs: the same permutation on both sides
+    ox = sparse_mod._morton_order(x)
+    X2, a2, Y2, b2 = sparse_mod._spatial_order(x, a, y, b, paired)
+    assert np.array_equal(X2, x[ox]) and np.array_equal(a2, a[ox])
+    if paired:
+        assert np.array_equal(Y2 - X2, (y - x)[ox]) and np.array_equal(b2, a2)
