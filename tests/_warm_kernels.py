@@ -107,7 +107,27 @@ def _steps() -> int:
                 simulate(Scene(effects, pairsum=pairsum), x, v, (0.0, 0.03), 0.01, seed=1)
     x = rng.uniform(0, 20, size=(3000, 2))
     Scene([AttractionRepulsion(Morse(soft=0.2))], pairsum=CellList()).rhs(x, x)
+    _layouts(rng)
     return 0
+
+
+def _layouts(rng) -> None:
+    """Signatures the suite's tests reach directly (tests/test_compiled_worker.py) or through
+    Fortran-ordered states, which a fresh clone otherwise compiled inside pytest (found by
+    the cache files written after the warm-up: five signatures)."""
+    import numpy as np
+
+    from kinred.integrate import _kernels as ik
+    from kinred.pairsum import _kernels as pk
+
+    z = rng.normal(size=(8, 3))
+    f, c = np.asfortranarray(z), np.ascontiguousarray(z)
+    ik.euler_pair(f.copy(order="F"), c.copy(), c.copy(), c.copy(), 0.1)
+    ik.euler_pair(c.copy(), c.copy(), c.copy(), f.copy(order="F"), 0.1)
+    ik.sweep(f, np.ones(8), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(4))
+    q = np.abs(rng.normal(size=(2, 5)))
+    pk.cs_pow(q.copy(), 0.8, 1.62, np.empty((3, 5)))
+    pk.cs_pow(q.astype(np.float32), np.float32(0.8), np.float32(1.62), np.empty((3, 5)))
 
 
 if __name__ == "__main__":
