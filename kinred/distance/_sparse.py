@@ -126,7 +126,7 @@ def _spatial_order(X, a, Y, b, paired: bool):
     solves 26 → 16 s). Problems of equal weights (the assignment solver) keep their order."""
     ox = _morton_order(X)
     oy = ox if paired else _morton_order(Y)
-    return (np.ascontiguousarray(X[ox]), a[ox], np.ascontiguousarray(Y[oy]), b[oy])
+    return X[ox], a[ox], Y[oy], b[oy]          # row gathers: C-contiguous already
 
 
 def _initial_keys(X, a, Y, b, k: int, paired: bool):
