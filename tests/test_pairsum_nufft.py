@@ -117,6 +117,27 @@ def test_error_follows_tol_as_documented():
     assert all(b <= a / 10 for a, b in zip(errs, errs[1:])), errs
 
 
+@settings(max_examples=25, deadline=None)
+@given(st.integers(2, 6), st.integers(40, 300), st.sampled_from([0.0, 0.1, 0.5]),
+       st.sampled_from([1e-2, 1e-4, 1e-7]), st.floats(0.5, 20.0), st.floats(1e-4, 1.0),
+       st.integers(0, 2**16))
+def test_tight_clusters_keep_the_field_error_below_tol(n_clusters, n, soft, tol, spread,
+                                                       flat, seed):
+    """Agents in a few tight clusters with a soft-core (or cusped) Morse kernel: most of the
+    largest kernel values sit on pairs inside a cluster, whose carrier difference vanishes,
+    so they do not set the field's scale. An accuracy scale κ taken as the plain mean of
+    ``|φ|`` over pairs let the error reach 5·tol (5 clusters, soft = 0.5, tol = 1e-7)."""
+    rng = np.random.default_rng(seed)
+    ext = spread * np.array([1.0, flat])
+    centres = rng.uniform(0.0, 1.0, (n_clusters, 2)) * ext
+    x = centres[rng.integers(0, n_clusters, n)] + 1e-3 * spread * rng.normal(size=(n, 2)) + 469.0
+    v = rng.normal(size=(n, 2))
+    w = rng.dirichlet(np.ones(n))
+    eff = [AttractionRepulsion(Morse(1.07, 4.5, 1.17, 0.3, soft=soft))]
+    ref = _field(eff, x, v, "numpy", w)
+    assert _rel(_field(eff, x, v, NUFFT(tol, near_field=None), w), ref) <= tol
+
+
 def test_centred_carriers_keep_the_accuracy_of_tiny_fluctuations():
     """Velocities with a common mean 1e3 and fluctuations 1e-9: the pair sum (of size ~1e-9)
     is accurate relative to the fluctuations, not to the mean (1e12 times larger)."""

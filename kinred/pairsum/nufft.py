@@ -317,8 +317,9 @@ def _strengths(z: np.ndarray, c: np.ndarray) -> tuple:
     return zt, packed
 
 
-def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
-    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built):
+def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None, z=None):
+    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built; its
+    accuracy scale weighted by the carrier ``z`` when given, ``_fastsum.kernel_scales``):
     a :class:`_fastsum.Grid`, None when the kernel vanishes on every difference, or
     ``"nan"`` for a non-finite cloud.
 
@@ -334,7 +335,7 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
         return "nan"
     grid = g.grid
     if grid is None or not grid.fits(ext):
-        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name, z, plan.c)
         if kinf == 0.0:                      # the kernel vanishes on every difference
             return None
         split = plan.near_field is True or not g.smooth or (
@@ -359,14 +360,14 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
 
 
 
-def group_estimate(plan: NUFFTPlan, g: _Group, s: np.ndarray) -> float:
+def group_estimate(plan: NUFFTPlan, g: _Group, s: np.ndarray, z=None) -> float:
     """Estimated seconds of one group's sums on the cloud ``s`` without building a grid
     (milliseconds: the 1-D slices of the single grid, the near-field ladder's closed forms),
     the cheaper of what :func:`ensure_grid` may build; ``inf`` when neither fits."""
     ext = np.ptp(s, axis=0)
     if not np.all(np.isfinite(ext)):
         return 0.0
-    kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+    kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name, z, plan.c)
     if kinf == 0.0:
         return 0.0
     n, k = s.shape
@@ -388,7 +389,7 @@ def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     """``Σⱼ cⱼ φᵢⱼ z̃ⱼ − (Σⱼ cⱼ φᵢⱼ) z̃ᵢ`` of one group, ``(n, d)``, fresh."""
     n, d = zt.shape
     lo, hi = s.min(axis=0), s.max(axis=0)
-    grid = ensure_grid(plan, g, s, lo, hi)
+    grid = ensure_grid(plan, g, s, lo, hi, zt)
     if grid is None or isinstance(grid, str):
         # a diverging state (let the integrator's guard see it), or a vanishing kernel
         return np.full((n, d), np.nan) if grid == "nan" else np.zeros((n, d))
