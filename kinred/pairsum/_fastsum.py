@@ -492,7 +492,11 @@ def estimate_modes(phi, ext: np.ndarray, tol: float, kinf: float, kappa: float,
     for j in WIDTH_POWERS:
         t = big * 2.0 ** j
         C = _centre_value(phi, E, t, name)
-        xi = _bandwidth_1d(phi, big, t, xt, C, SUP_FACTOR * tol * kappa, max_modes, name)
+        # the slice need not be sampled beyond the half-modes whose grid exceeds max_modes
+        # (with max_modes as its cap, a flat 3-D cloud sampled 10⁸ points per slice: 33 s
+        # of "cheap" estimate before a 0.1 s dense sum, found by a sweep of random clouds)
+        xi = _bandwidth_1d(phi, big, t, xt, C, SUP_FACTOR * tol * kappa,
+                           _slice_cap(E, t, max_modes), name)
         if xi is not None:
             best = min(best, math.prod(2 * math.floor(SLICE_TO_KD * xi * (e + t) / math.pi) + 1
                                        for e in E))
