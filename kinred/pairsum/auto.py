@@ -31,7 +31,7 @@ from .. import _parallel
 from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args
-from .cells import TRUNC_FACTOR, CellList, cell_scales, cutoff_radius
+from .cells import CellList, term_cutoff
 from .dense import Dense
 from .nufft import NUFFT, ensure_grid, group_estimate
 
@@ -259,12 +259,10 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
     for src in sub.sources:
         s = np.asarray(state[src.name], dtype=float)
         ext = np.ptp(s, axis=0)
-        dmax = float(np.sqrt(np.sum(ext * ext)))
         R = 0.0
         for t, bound in zip(src.terms, src.bounds):
-            kinf, kappa = cell_scales(t.kernel, s, ext)
-            if kinf > 0.0 and dmax > 0.0:
-                R = max(R, cutoff_radius(bound, TRUNC_FACTOR * sub.tol * kappa, dmax))
+            R = max(R, term_cutoff(t.kernel, bound, s, ext, state[t.carrier], sub.c,
+                                   sub.tol)[0])
         if R == 0.0:
             continue
         frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)
