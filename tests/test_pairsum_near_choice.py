@@ -94,14 +94,15 @@ def test_auto_refuses_the_ring_of_radius_20_at_a_million_within_seconds():
     """Regression (issue 24): ``pairsum="auto"`` on the ring of radius 20, N = 10⁶, tol 1e-6
     started a near field of about 7·10⁹ pairs (minutes per right-hand side, "did not finish
     in 10 minutes"); now every candidate is estimated without building a grid and the size
-    is refused, naming the estimates, in well under the time of one such rhs (2.2 s
-    measured)."""
+    is refused, naming the estimates, in well under the time of one such rhs (measured 4.3 s,
+    5.8 s since the accuracy scale follows the carrier differences and the cell list's cutoff
+    is checked on sampled rows: the limit is 3× that)."""
     x, v = _ring(1_000_000, 20.0)
     sc = Scene([SelfPropulsion(1.0, 0.5), AttractionRepulsion(MORSE)], pairsum="auto")
     t = time.perf_counter()
     with pytest.raises(TooLarge, match=r"max_seconds=60.*nufft .* s"):
         sc.rhs(x, v)
-    assert time.perf_counter() - t < 10.0
+    assert time.perf_counter() - t < 18.0
     plan = next(iter(sc._plans.values()))
     # no near field was summed: a grid is built at most when the estimate comes within
     # CLEAR_LOSS of the limit (then measured and refused)

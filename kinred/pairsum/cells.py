@@ -329,9 +329,12 @@ def cell_scales(kernel, s: np.ndarray, ext: np.ndarray) -> tuple:
     return kinf, min(kappa, max(float(keep.mean()), _fastsum.KAPPA_FLOOR * kinf))
 
 
-#: Rows of the field whose every pair :func:`term_cutoff` checks (fixed seed), fewer for
-#: large clouds (about 2²³ pairs in all).
-ROW_SAMPLE = 16
+#: Rows of the field whose every pair :func:`term_cutoff` checks (fixed seed): all of them
+#: up to ``√ROW_PAIRS`` agents, then about :data:`ROW_PAIRS` pairs in all, at least
+#: ``ROW_SAMPLE`` rows (a sparse cloud's field lives on a few pairs per row, which a sample
+#: of rows can miss entirely: 200 agents spread over 344 kernel widths).
+ROW_SAMPLE = 4
+ROW_PAIRS = 1 << 22
 _ROW_SEED = 0xCE11
 #: Distance bins of :func:`term_cutoff`'s tail sums.
 CUTOFF_BINS = 4096
@@ -346,7 +349,7 @@ def term_cutoff(kernel, bound, s: np.ndarray, ext: np.ndarray, z: np.ndarray | N
 
     1. ``B(R₀) ≤ TRUNC_FACTOR·tol·κ₀`` with ``κ₀`` of :func:`cell_scales` (4096 sampled pairs,
        floored at ``10⁻⁴‖φ‖∞``): each pair left out changes a row sum by at most ``B(R₀)``;
-    2. on :data:`ROW_SAMPLE` rows ``i`` (fixed seed) and *all* their pairs, the smallest ``R₁``
+    2. on sampled rows ``i`` (:data:`ROW_PAIRS`; all rows of a small cloud) and *all* their pairs, the smallest ``R₁``
        (to ``dmax/4096``) whose left-out pairs are bounded by the tail bound at their own
        distances within a ``TRUNC_FACTOR·tol`` of the field's scale:
        ``Σᵢ Σ_{j: rᵢⱼ>R₁} cⱼ B(rᵢⱼ)|zⱼ − zᵢ| ≤ TRUNC_FACTOR·tol·Σᵢ Σⱼ cⱼ|φᵢⱼ||zⱼ − zᵢ|``.
@@ -386,7 +389,7 @@ def _rows(s, z, c, top, kernel, bound, name):
     if z is None:
         return None
     n = s.shape[0]
-    m = max(4, min(ROW_SAMPLE, (1 << 23) // max(n, 1)))
+    m = max(ROW_SAMPLE, ROW_PAIRS // max(n, 1))
     rows = (np.arange(n) if n <= m
             else np.sort(np.random.default_rng(_ROW_SEED).choice(n, m, replace=False)))
     z = np.asarray(z, dtype=np.float64)
