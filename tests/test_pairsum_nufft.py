@@ -343,3 +343,55 @@ def test_the_cheap_mode_estimate_samples_no_slice_beyond_the_mode_limit(monkeypa
     soft = radial_profile(Morse(soft=0.5))
     assert _fastsum.estimate_modes(soft, np.array([2.0, 1.0, 0.5]), 1e-4, 1.0, 0.1, 2**20,
                                    "Morse") is not None
+
+
+def _clusters(seed, n=1200):
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0.0, 1.0, (5, 2)) * [0.0055, 7.74]
+    x = centres[rng.integers(0, 5, n)] + 7.74e-3 * rng.normal(size=(n, 2)) + 469.0
+    return x, rng.normal(size=(n, 2)), rng.dirichlet(np.ones(n))
+
+
+CLUSTER_MORSE = [AttractionRepulsion(Morse(1.066, 4.535, 1.169, 0.3015, soft=0.5))]
+
+
+def test_the_field_check_rebuilds_a_grid_that_misses_tol_on_sampled_rows():
+    """A grid's first sums are compared with the exact ones on sampled rows (all of them
+    here); five tight clusters miss tol with the accuracy scale of random pairs, so the grid
+    is rebuilt finer until they do not – and the whole field is then within tol."""
+    x, v, w = _clusters(2)
+    sc = Scene(CLUSTER_MORSE, "sum", weights=w, pairsum=NUFFT(1e-7))
+    got = sc.rhs(x, v)[1]
+    g = next(iter(sc._plans.values())).groups[0]
+    assert g.builds >= 2 and g.kappa_scale < 0.5, (g.builds, g.kappa_scale)
+    assert g.check["error"] <= 0.5e-7 and not g.check["below_floor"]
+    assert _rel(got, _field(CLUSTER_MORSE, x, v, "numpy", w)) <= 1e-7
+    # the check ran once: the next call reuses the grid
+    sc.rhs(x, v)
+    assert g.builds == next(iter(sc._plans.values())).groups[0].builds
+
+
+def test_the_field_check_keeps_a_grid_that_meets_tol():
+    x, v, w = _cloud(800, 2, 4.0, seed=11)
+    sc = Scene(MIXED, weights=w, pairsum=NUFFT(1e-6))
+    sc.rhs(x, v)
+    for g in next(iter(sc._plans.values())).groups:
+        assert g.builds == 1 and g.kappa_scale == 1.0
+        assert g.check["error"] <= 0.5e-6
+
+
+def test_the_field_check_warns_when_no_finer_grid_meets_it(monkeypatch):
+    """A check that cannot be met (made impossible here) gives up – after CHECK_REBUILDS finer
+    grids, or when the next one would exceed max_modes – with a KinredWarning naming the
+    measured error, and the sums of the last grid are returned."""
+    from kinred.errors import KinredWarning
+    from kinred.pairsum import nufft
+
+    monkeypatch.setattr(nufft, "CHECK_FACTOR", 1e-30)
+    x, v, w = _clusters(1, n=300)
+    sc = Scene(CLUSTER_MORSE, "sum", weights=w, pairsum=NUFFT(1e-4))
+    with pytest.warns(KinredWarning, match="miss the requested tol=0.0001 on 300 sampled rows"):
+        got = sc.rhs(x, v)[1]
+    assert _rel(got, _field(CLUSTER_MORSE, x, v, "numpy", w)) <= 1e-2
+    g = next(iter(sc._plans.values())).groups[0]
+    assert g.checked and 1 <= g.builds <= 1 + nufft.CHECK_REBUILDS

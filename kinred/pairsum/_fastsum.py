@@ -187,21 +187,12 @@ def _profile(phi, s: np.ndarray, name: str) -> np.ndarray:
     return val
 
 
-def kernel_scales(phi, s: np.ndarray, ext: np.ndarray, name: str, z: np.ndarray | None = None,
-                  c: np.ndarray | None = None) -> tuple[float, float]:
+def kernel_scales(phi, s: np.ndarray, ext: np.ndarray, name: str) -> tuple[float, float]:
     """``(‖φ‖∞, κ)`` for the cloud ``s (N, k)`` of extents ``ext``.
 
     ``‖φ‖∞`` is the maximum of ``|φ|`` over ``[0, |ext|]`` (4097 samples); ``κ`` the mean of
     ``|φ(|sᵢ − sⱼ|)|`` over pairs ``i ≠ j`` (all of them for small ``N``, else 4096 drawn with a
     fixed seed), floored at :data:`KAPPA_FLOOR` ``·‖φ‖∞``.
-
-    With the carrier ``z (N, d)`` (and the coefficients ``c``), ``κ`` is at most the mean
-    weighted by ``wᵢⱼ = cⱼ|zⱼ − zᵢ|``: an error ``δ`` per kernel value changes row ``i`` of the
-    field ``Σⱼ cⱼ φᵢⱼ (zⱼ − zᵢ)`` by up to ``δ Σⱼ wᵢⱼ``, while the field is about
-    ``Σⱼ wᵢⱼ |φᵢⱼ|``. The plain mean counts the pairs whose carrier difference vanishes –
-    tight clusters, where a soft core makes ``|φ|`` largest – and let the error exceed ``tol``
-    (found by a sweep of random clouds against Dense: five clusters in 2-D, Morse with
-    ``soft = 0.5``, ``tol = 1e-7``: field error ``5·tol``; weighted: ``0.08·tol``).
     """
     dmax = float(np.sqrt(np.sum(ext * ext)))
     kinf = float(np.max(np.abs(_profile(phi, np.linspace(0.0, dmax, 4097), name))))
@@ -213,16 +204,8 @@ def kernel_scales(phi, s: np.ndarray, ext: np.ndarray, name: str, z: np.ndarray 
     i, j = i[i != j], j[i != j]          # the field has no self-pairs (they cancel exactly)
     if i.size == 0:
         return kinf, kinf
-    vals = np.abs(_profile(phi, np.sqrt(np.sum((s[i] - s[j]) ** 2, axis=1)), name))
-    kappa = float(np.mean(vals))
-    if z is not None:
-        w = np.sqrt(np.sum((np.asarray(z, dtype=np.float64)[j]
-                            - np.asarray(z, dtype=np.float64)[i]) ** 2, axis=1))
-        if c is not None:
-            w = w * np.abs(np.asarray(c, dtype=np.float64)[j])
-        wsum = float(w.sum())
-        if wsum > 0.0 and np.isfinite(wsum):
-            kappa = min(kappa, float(np.dot(vals, w)) / wsum)
+    kappa = float(np.mean(np.abs(_profile(phi, np.sqrt(np.sum((s[i] - s[j]) ** 2, axis=1)),
+                                          name))))
     return kinf, max(kappa, KAPPA_FLOOR * kinf)
 
 

@@ -147,7 +147,7 @@ class _Rung(NamedTuple):
     near: float
 
 
-def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim) -> list:
+def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, scale=1.0) -> list:
     """The ladder's radii as :class:`_Rung`, cheapest first: the near pairs at the compiled
     pass's cost of a tabulated near part (:func:`near_kernel`), the far grid's transforms at
     the finufft ``ε`` it will get (``_fastsum.finufft_eps`` of ``κ_F`` and ``‖φ_F‖∞``; it
@@ -160,7 +160,7 @@ def _ranked(phi, s, ext, tol, kappa, max_modes, name, dim) -> list:
     ranked = []
     for eps_i in ladder:
         frac = float(np.mean(dist < eps_i)) if dist.size else 0.0
-        kap = _far_kappa(phi, dist, eps_i, kappa, name)
+        kap = _far_kappa(phi, dist, eps_i, kappa, name) * scale
         tau = _tau(phi, eps_i, dmax, tol, kap, name)
         phi_f = far_profile(phi, eps_i, tau)
         kinf = max(float(np.max(np.abs(_fastsum._profile(phi_f, np.linspace(0.0, dmax, 4097),
@@ -181,22 +181,22 @@ def estimate(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, ka
 
 
 def prefer_split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kinf: float,
-                 kappa: float, max_modes: int, name: str, dim: int) -> bool:
+                 kappa: float, max_modes: int, name: str, dim: int, scale: float = 1.0) -> bool:
     """Whether the split's cheapest radius is estimated cheaper than one grid of the whole
     kernel (its modes from the 1-D slices, ``_fastsum.estimate_modes``): a kernel whose soft
     core is narrow against the cloud (the 2-D D'Orsogna ring of issue 24 at N = 2·10⁴) is
     cheaper split; at N = 10⁶ its near pairs cost more than the single grid."""
     n, k = s.shape
-    single = _fastsum.estimate_modes(phi, ext, tol, kinf, kappa, max_modes, name)
+    single = _fastsum.estimate_modes(phi, ext, tol, kinf, kappa * scale, max_modes, name)
     if single is None:
         return True
-    eps = _fastsum.finufft_eps(tol, kappa, kinf)
-    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)[0].cost
+    eps = _fastsum.finufft_eps(tol, kappa * scale, kinf)
+    best = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, scale)[0].cost
     return best < _cost.nufft_seconds(n, dim, single, eps, k)
 
 
 def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa: float,
-          max_modes: int, name: str, dim: int) -> Split:
+          max_modes: int, name: str, dim: int, scale: float = 1.0) -> Split:
     """The near-field split of least estimated cost for the cloud ``s`` (module notes).
 
     Raises
@@ -205,7 +205,7 @@ def split(phi, kernels: tuple, s: np.ndarray, ext: np.ndarray, tol: float, kappa
         When no radius of the ladder gives a grid within ``max_modes`` (the last error).
     """
     dmax = float(np.sqrt(np.sum(ext * ext)))
-    ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim)
+    ranked = _ranked(phi, s, ext, tol, kappa, max_modes, name, dim, scale)
     last = None
     for r in [r for r in ranked if math.isfinite(r.cost)][:TRIES]:
         try:
