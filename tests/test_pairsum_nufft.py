@@ -395,3 +395,25 @@ def test_the_field_check_warns_when_no_finer_grid_meets_it(monkeypatch):
     assert _rel(got, _field(CLUSTER_MORSE, x, v, "numpy", w)) <= 1e-2
     g = next(iter(sc._plans.values())).groups[0]
     assert g.checked and 1 <= g.builds <= 1 + nufft.CHECK_REBUILDS
+
+
+def test_pairs_without_a_carrier_difference_do_not_set_the_accuracy_scale():
+    """Half the agents on one point: a quarter of the pairs sit at φ(0) but add nothing to the
+    field (their carrier difference is zero), and inflated κ 80× (3-D, Morse with a narrow
+    repulsion: field error 7·tol at tol = 1e-3, found by benchmarks/sweep_pairsum_accuracy)."""
+    from kinred.pairsum import _fastsum
+
+    rng = np.random.default_rng(13)
+    x = rng.uniform(0.0, 1.0, (3000, 3)) * [50.6, 28.9, 4e-5] - 26.3
+    x[:1500] = x[0]
+    v = rng.normal(size=x.shape)
+    eff = [AttractionRepulsion(Morse(0.475, 3.16, 1.85, 0.132, soft=0.5))]
+    phi = radial_profile(eff[0].kernel)
+    ext = np.ptp(x, axis=0)
+    _, plain = _fastsum.kernel_scales(phi, x, ext, "Morse")
+    _, moving = _fastsum.kernel_scales(phi, x, ext, "Morse", z=x)
+    assert moving < plain / 20
+    # the velocities differ on coincident positions: those pairs count for alignment
+    assert _fastsum.kernel_scales(phi, x, ext, "Morse", z=v)[1] == plain
+    ref = _field(eff, x, v, "numpy", None, "mean")
+    assert _rel(_field(eff, x, v, NUFFT(1e-3, near_field=None), None, "mean"), ref) <= 1e-3

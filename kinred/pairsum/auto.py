@@ -221,14 +221,14 @@ def _nufft_cost(plan: AutoPlan, state: dict, nt: int, bound: float = math.inf) -
     for g in sub.groups:         # groups whose grid would be built: estimate without it
         s = np.asarray(state[g.source], dtype=float)
         if g.grid is None or not g.grid.fits(np.ptp(s, axis=0)):
-            cheap += group_estimate(sub, g, s)
+            cheap += group_estimate(sub, g, s, state[g.carrier])
     if cheap / nt > bound:
         return cheap / nt
     total = 0.0
     for g in sub.groups:
         s = np.asarray(state[g.source], dtype=float)
         try:
-            grid = ensure_grid(sub, g, s)
+            grid = ensure_grid(sub, g, s, z=state[g.carrier])
         except TooLarge as exc:
             plan.candidates["nufft"] = (backend, sub, str(exc))
             return math.inf

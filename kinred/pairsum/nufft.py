@@ -325,8 +325,9 @@ def _strengths(z: np.ndarray, c: np.ndarray) -> tuple:
     return zt, packed
 
 
-def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
-    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built):
+def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None, z=None):
+    """The group's grid for the cloud ``s`` (kept while the cloud fits it, else built; ``z``
+    the carrier, for the accuracy scale of ``_fastsum.kernel_scales``):
     a :class:`_fastsum.Grid`, None when the kernel vanishes on every difference, or
     ``"nan"`` for a non-finite cloud.
 
@@ -342,7 +343,7 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
         return "nan"
     grid = g.grid
     if grid is None or not grid.fits(ext):
-        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+        kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name, z)
         if kinf == 0.0:                      # the kernel vanishes on every difference
             return None
         # the field check's scale (below the floor of kernel_scales if it must)
@@ -369,14 +370,14 @@ def ensure_grid(plan: NUFFTPlan, g: _Group, s: np.ndarray, lo=None, hi=None):
 
 
 
-def group_estimate(plan: NUFFTPlan, g: _Group, s: np.ndarray) -> float:
+def group_estimate(plan: NUFFTPlan, g: _Group, s: np.ndarray, z=None) -> float:
     """Estimated seconds of one group's sums on the cloud ``s`` without building a grid
     (milliseconds: the 1-D slices of the single grid, the near-field ladder's closed forms),
     the cheaper of what :func:`ensure_grid` may build; ``inf`` when neither fits."""
     ext = np.ptp(s, axis=0)
     if not np.all(np.isfinite(ext)):
         return 0.0
-    kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name)
+    kinf, kappa = _fastsum.kernel_scales(g.phi, s, ext, g.name, z)
     if kinf == 0.0:
         return 0.0
     n, k = s.shape
@@ -408,7 +409,7 @@ def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
         g.kappa_scale *= min(0.5, CHECK_FACTOR * 0.5 * plan.tol / g.check["error"])
         g.grid = None
         try:
-            ensure_grid(plan, g, s)
+            ensure_grid(plan, g, s, z=zt)
         except TooLarge:                     # finer exceeds max_modes: keep the best one
             g.grid, g.split, g.kappa_scale = keep
             g.checked = True
@@ -424,7 +425,7 @@ def _group_sum_once(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     """One evaluation of :func:`_group_sum` on the group's current grid (built if needed)."""
     n, d = zt.shape
     lo, hi = s.min(axis=0), s.max(axis=0)
-    grid = ensure_grid(plan, g, s, lo, hi)
+    grid = ensure_grid(plan, g, s, lo, hi, zt)
     if grid is None or isinstance(grid, str):
         # a diverging state (let the integrator's guard see it), or a vanishing kernel
         return np.full((n, d), np.nan) if grid == "nan" else np.zeros((n, d))
