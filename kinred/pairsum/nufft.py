@@ -401,8 +401,8 @@ def _group_sum(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     grid rebuilt finer (at most :data:`CHECK_REBUILDS` times) while they miss."""
     for _ in range(CHECK_REBUILDS + 1):
         out = _group_sum_once(plan, g, s, zt, strengths)
-        if g.checked or g.grid is None or isinstance(g.grid, str):
-            return out
+        if g.checked or g.grid is None or not np.all(np.isfinite(out)):
+            return out                       # (a diverging state: the integrator's guard)
         if _check_rows(plan, g, s, zt, out):
             return out
         keep = (g.grid, g.split, g.kappa_scale)
