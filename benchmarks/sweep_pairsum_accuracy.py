@@ -124,8 +124,8 @@ def main(argv=None) -> int:
             if not err <= 1.0:
                 st["failed"] += 1
             if not err <= 1.0 or dt > 5.0:
-                print(f"  seed {seed} {name}: error {err:.3g}·tol, {dt:.1f} s; {label}, tol={tol:g}, "
-                      f"{norm}, weights={w is not None}, {eff}", flush=True)
+                print(f"  seed {seed} {name}: error {err:.3g}·tol, {dt:.1f} s; {label}, "
+                      f"tol={tol:g}, {norm}, weights={w is not None}, {eff}", flush=True)
     print(f"seeds {args.seeds[0]}..{args.seeds[1] - 1}:")
     for name, st in stats.items():
         print(f"  {name:<12} runs {st['runs']:4d}  refused {st['refused']:4d}  failed "

@@ -350,8 +350,8 @@ def term_cutoff(kernel, bound, s: np.ndarray, ext: np.ndarray, z: np.ndarray | N
     1. ``B(R₀) ≤ TRUNC_FACTOR·tol·κ₀`` with ``κ₀`` of :func:`cell_scales` (4096 sampled pairs,
        floored at ``10⁻⁴‖φ‖∞``): each pair left out changes a row sum by at most ``B(R₀)``;
     2. on sampled rows ``i`` (:data:`ROW_PAIRS`; all rows of a small cloud) and *all* their
-       pairs, the smallest ``R₁`` (to ``dmax/4096``) whose left-out pairs are bounded by the tail bound at their own
-       distances within a ``TRUNC_FACTOR·tol`` of the field's scale:
+       pairs, the smallest ``R₁`` (to ``dmax/4096``) whose left-out pairs are bounded by the
+       tail bound at their own distances within a ``TRUNC_FACTOR·tol`` of the field's scale:
        ``Σᵢ Σ_{j: rᵢⱼ>R₁} cⱼ B(rᵢⱼ)|zⱼ − zᵢ| ≤ TRUNC_FACTOR·tol·Σᵢ Σⱼ cⱼ|φᵢⱼ||zⱼ − zᵢ|``.
        A row loses ``Σ_{left} cⱼ φᵢⱼ (zⱼ − zᵢ)``: the pairs left out are those of largest
        carrier difference (for positions, their distance), which a scale per *pair* misses –
