@@ -404,8 +404,8 @@ def test_pairs_without_a_carrier_difference_do_not_set_the_accuracy_scale():
     from kinred.pairsum import _fastsum
 
     rng = np.random.default_rng(13)
-    x = rng.uniform(0.0, 1.0, (3000, 3)) * [50.6, 28.9, 4e-5] - 26.3
-    x[:1500] = x[0]
+    x = rng.uniform(0.0, 1.0, (1600, 3)) * [50.6, 28.9, 4e-5] - 26.3
+    x[:800] = x[0]
     v = rng.normal(size=x.shape)
     eff = [AttractionRepulsion(Morse(0.475, 3.16, 1.85, 0.132, soft=0.5))]
     phi = radial_profile(eff[0].kernel)
