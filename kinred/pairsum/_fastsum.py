@@ -218,6 +218,16 @@ def kernel_scales(phi, s: np.ndarray, ext: np.ndarray, name: str,
     return kinf, max(kappa, KAPPA_FLOOR * kinf)
 
 
+def sample_rows(n: int, min_rows: int, pairs: int, seed: int) -> np.ndarray:
+    """Sorted rows of an ``n``-agent field to check against exact sums: all of them when
+    ``n ≤ max(min_rows, pairs/n)``, else that many drawn with ``seed`` (about ``pairs`` pairs
+    in all). Used by the NUFFT's field check and the cell list's cutoff."""
+    m = max(min_rows, pairs // max(n, 1))
+    if n <= m:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, m, replace=False))
+
+
 def _window(rho: np.ndarray, E: float, t: float, xt: float) -> np.ndarray:
     """``½ erfc((|ρ| − E − t/2)/σ)``, ``σ = t/(2·xt)``: ``1 − τ`` at ``E``, ``τ`` at ``E + t``."""
     return 0.5 * erfc((np.abs(rho) - E - 0.5 * t) * (2.0 * xt / t))

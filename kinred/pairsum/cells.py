@@ -389,9 +389,7 @@ def _rows(s, z, c, top, kernel, bound, name):
     if z is None:
         return None
     n = s.shape[0]
-    m = max(ROW_SAMPLE, ROW_PAIRS // max(n, 1))
-    rows = (np.arange(n) if n <= m
-            else np.sort(np.random.default_rng(_ROW_SEED).choice(n, m, replace=False)))
+    rows = _fastsum.sample_rows(n, ROW_SAMPLE, ROW_PAIRS, _ROW_SEED)
     z = np.asarray(z, dtype=np.float64)
     cw = np.ones(n) if c is None else np.abs(np.asarray(c, dtype=np.float64))
     edges = np.linspace(0.0, top, CUTOFF_BINS + 1)

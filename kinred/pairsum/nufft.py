@@ -487,9 +487,7 @@ def _check_rows(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     from .cells import kernel_values
 
     n = s.shape[0]
-    m = max(CHECK_ROWS, CHECK_PAIRS // max(n, 1))
-    rows = (np.arange(n) if n <= m
-            else np.sort(np.random.default_rng(_CHECK_SEED).choice(n, m, replace=False)))
+    rows = _fastsum.sample_rows(n, CHECK_ROWS, CHECK_PAIRS, _CHECK_SEED)
     vals = [kernel_values(k) for k in g.kernels]
     exact = np.zeros((rows.size, zt.shape[1]))
     step = max(1, (1 << 20) // rows.size)
