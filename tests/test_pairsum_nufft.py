@@ -125,8 +125,9 @@ def test_tight_clusters_keep_the_field_error_below_tol(n_clusters, n, soft, tol,
                                                        flat, seed):
     """Agents in a few tight clusters with a soft-core (or cusped) Morse kernel: most of the
     largest kernel values sit on pairs inside a cluster, whose carrier difference vanishes,
-    so they do not set the field's scale. An accuracy scale κ taken as the plain mean of
-    ``|φ|`` over pairs let the error reach 5·tol (5 clusters, soft = 0.5, tol = 1e-7)."""
+    so they do not set the field's scale: the plain mean of ``|φ|`` over pairs (κ) let the
+    error reach 5·tol (5 clusters, soft = 0.5, tol = 1e-7) before the field check rebuilt
+    such grids finer."""
     rng = np.random.default_rng(seed)
     ext = spread * np.array([1.0, flat])
     centres = rng.uniform(0.0, 1.0, (n_clusters, 2)) * ext

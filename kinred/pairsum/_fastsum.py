@@ -228,6 +228,17 @@ def sample_rows(n: int, min_rows: int, pairs: int, seed: int) -> np.ndarray:
     return np.sort(np.random.default_rng(seed).choice(n, m, replace=False))
 
 
+def row_blocks(s: np.ndarray, rows: np.ndarray, elems: int = 1 << 20):
+    """``(a, e, q)`` over column blocks ``[a, e)`` of about ``elems`` pairs: ``q`` the squared
+    distances ``|s_{rows} − s_{a:e}|²``, shape ``(rows.size, e − a)`` (the exact row sums of
+    :func:`sample_rows`' rows, without an ``N × N`` array)."""
+    n = s.shape[0]
+    step = max(1, elems // max(rows.size, 1))
+    for a in range(0, n, step):
+        e = min(n, a + step)
+        yield a, e, np.sum((s[a:e][None, :, :] - s[rows][:, None, :]) ** 2, axis=2)
+
+
 def _window(rho: np.ndarray, E: float, t: float, xt: float) -> np.ndarray:
     """``½ erfc((|ρ| − E − t/2)/σ)``, ``σ = t/(2·xt)``: ``1 − τ`` at ``E``, ``τ`` at ``E + t``."""
     return 0.5 * erfc((np.abs(rho) - E - 0.5 * t) * (2.0 * xt / t))

@@ -395,10 +395,8 @@ def _rows(s, z, c, top, kernel, bound, name):
     edges = np.linspace(0.0, top, CUTOFF_BINS + 1)
     tail, wsum = np.zeros(CUTOFF_BINS), np.zeros(CUTOFF_BINS)
     num = 0.0
-    step = max(1, (1 << 20) // rows.size)
-    for a in range(0, n, step):
-        e = min(n, a + step)
-        d = np.sqrt(np.sum((s[a:e][None, :, :] - s[rows][:, None, :]) ** 2, axis=2)).ravel()
+    for a, e, q in _fastsum.row_blocks(s, rows):
+        d = np.sqrt(q).ravel()
         w = (cw[None, a:e] * np.sqrt(np.sum((z[a:e][None, :, :] - z[rows][:, None, :]) ** 2,
                                             axis=2))).ravel()
         num += float(np.dot(np.abs(_fastsum._profile(kernel, d, name)), w))

@@ -490,10 +490,7 @@ def _check_rows(plan: NUFFTPlan, g: _Group, s: np.ndarray, zt: np.ndarray,
     rows = _fastsum.sample_rows(n, CHECK_ROWS, CHECK_PAIRS, _CHECK_SEED)
     vals = [kernel_values(k) for k in g.kernels]
     exact = np.zeros((rows.size, zt.shape[1]))
-    step = max(1, (1 << 20) // rows.size)
-    for a in range(0, n, step):
-        e = min(n, a + step)
-        q = np.sum((s[a:e][None, :, :] - s[rows][:, None, :]) ** 2, axis=2)
+    for a, e, q in _fastsum.row_blocks(s, rows):
         phi = vals[0](q.ravel())
         for v in vals[1:]:
             phi = phi + v(q.ravel())
