@@ -209,9 +209,7 @@ class CellList:
                                f"{type(plan).__name__} and x of shape {x.shape}")
         state = {"x": x, "v": v}
         terms = plan.terms
-        centred = {key: _kernels.centre_rows(np.ascontiguousarray(state[key]),
-                                             np.empty((plan.n, plan.dim)))
-                   for key in terms.carriers}
+        centred = cell_carriers(plan, state)
         zext = {key: _kernels.zext_rows(centred[key], plan.c, np.empty((plan.n, plan.dim + 1)))
                 for key in terms.carriers}
         acc = {kk: np.zeros((plan.n, plan.dim + 1)) for kk in terms.accumulators}
@@ -220,7 +218,7 @@ class CellList:
                 s = np.ascontiguousarray(state[src.name], dtype=np.float64)
                 if not np.all(np.isfinite(s)):
                     return {t: np.full((plan.n, plan.dim), np.nan) for t, _ in acc}
-                R = _cutoff(plan, src, s, centred)
+                R = source_cutoff(plan, src, s, centred)
                 if R == 0.0:
                     continue
                 near_sums(s, R, [(fn, zext[t.carrier], acc[(t.target, t.carrier)])
@@ -411,10 +409,19 @@ def _rows(s, z, c, top, kernel, bound, name):
     return num, edges, tail, wsum
 
 
-def _cutoff(plan: CellListPlan, src: _Source, s: np.ndarray, carriers: dict) -> float:
-    """The source's cutoff for the cloud ``s`` (``carriers``: each carrier's state, for the
-    cutoff of :func:`term_cutoff`): kept while its extents stay within
-    :data:`REDECIDE` of those it was derived for."""
+def cell_carriers(plan: CellListPlan, state: dict) -> dict:
+    """Each carrier's state, rows centred (``_kernels.centre_rows``): what
+    :meth:`CellList.evaluate` sums and :func:`source_cutoff` derives the cutoff from."""
+    return {key: _kernels.centre_rows(np.ascontiguousarray(state[key]),
+                                      np.empty((plan.n, plan.dim)))
+            for key in plan.terms.carriers}
+
+
+def source_cutoff(plan: CellListPlan, src: _Source, s: np.ndarray, carriers: dict) -> float:
+    """The source's cutoff for the cloud ``s`` (``carriers``: :func:`cell_carriers`, for the
+    cutoff of :func:`term_cutoff`): kept on ``src`` while its extents stay within
+    :data:`REDECIDE` of those it was derived for (``pairsum="auto"`` prices the cell list
+    with it, and the evaluation after the choice reuses it). Call under ``plan.lock``."""
     ext = s.max(axis=0) - s.min(axis=0)
     dmax = float(np.sqrt(np.sum(ext * ext)))
     if plan.cutoff is not None:
