@@ -418,3 +418,27 @@ def test_pairs_without_a_carrier_difference_do_not_set_the_accuracy_scale():
     assert _fastsum.kernel_scales(phi, x, ext, "Morse", z=v)[1] == plain
     ref = _field(eff, x, v, "numpy", None, "mean")
     assert _rel(_field(eff, x, v, NUFFT(1e-3, near_field=None), None, "mean"), ref) <= 1e-3
+
+
+@settings(max_examples=40, deadline=None)
+@given(k=st.integers(1, 3), seed=st.integers(0, 2**31), full=st.booleans())
+def test_truncated_series_is_the_inverse_dct_of_the_masked_coefficients(k, seed, full):
+    """The grid's truncation error is measured on the flat region's points by a separable
+    sum (``_fastsum.truncated_series``); its twin is scipy's inverse DCT-I of the masked
+    coefficients on the whole orthant."""
+    from scipy import fft as sfft
+
+    from kinred.pairsum import _fastsum
+
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(n) for n in rng.integers(2, 40 if k < 3 else 14, k))
+    b = rng.standard_normal(shape) * np.exp(-0.2 * sum(np.ix_(*[np.arange(n) for n in shape])))
+    counts = [n if full else int(rng.integers(1, n + 1)) for n in shape]
+    rows = [np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)) for n in shape]
+    mask = np.zeros(shape, bool)
+    mask[tuple(slice(0, c) for c in counts)] = True
+    twin = sfft.idctn(np.where(mask, b, 0.0) * math.prod(2 * (n - 1) for n in shape),
+                      type=1)[np.ix_(*rows)]
+    got = _fastsum.truncated_series(b, counts, rows)
+    assert got.shape == twin.shape
+    assert np.max(np.abs(got - twin)) <= 1e-13 * np.sum(np.abs(b)) * 2 ** k

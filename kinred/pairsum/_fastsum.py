@@ -27,7 +27,8 @@ NFFT3). The design here, written for kinred:
    array*: the smallest box ``|mₐ| ≤ Mₐ`` (equal physical bandwidth ``ξ`` on every axis,
    ``Mₐ = ⌊ξPₐ/2π⌋``) whose truncated series stays within ``target`` of ``K_R`` on every
    grid point of the flat region – the differences that occur; the transition region may
-   ring – by bisection over ``ξ`` with inverse DCTs. The sampling is refined while the ℓ1
+   ring – by bisection over ``ξ`` (the truncated series summed on those points only,
+   :func:`truncated_series`). The sampling is refined while the ℓ1
    content of the spectrum above 2/3 of its Nyquist frequency exceeds ``target`` (aliasing),
    up to ``2·max_modes`` samples.
 4. **Transforms.** ``â = NUFFT₁(α)`` (points → modes, ``isign = −1``), ``â_m ← b_m â_m``,
@@ -326,6 +327,23 @@ def _l1_tails(b, P):
     return shell, tails, step, min(int(nyq * 2.0 / 3.0 / step), tails.size - 1)
 
 
+def truncated_series(b: np.ndarray, counts, rows) -> np.ndarray:
+    """The series of the DCT-I coefficients ``b`` (orthant, ``Lₐ = b.shape[a]``; as
+    ``sfft.dctn(f, type=1)/Πₐ 2(Lₐ − 1)``) truncated to ``mₐ < counts[a]``, at the grid points
+    ``rows[a]`` of each axis only: ``Σ_m b_m Πₐ wₘ cos(π nₐ mₐ/(Lₐ − 1))`` (``wₘ = 1`` at
+    ``m = 0`` and ``m = Lₐ − 1``, else 2), axis by axis -- ``sfft.idctn`` of the masked
+    coefficients on the whole orthant, then the flat region's points, took 3.4 of the 4.9 s
+    of the 3-D slab's grid of issue 24 (429 × 127 × 69 modes)."""
+    rec = b[tuple(slice(0, c) for c in counts)]
+    for n, r in zip(b.shape, rows):
+        m = np.arange(rec.shape[0])
+        w = np.where((m == 0) | (m == n - 1), 1.0, 2.0)
+        # the phase reduced mod 2π in integers: exact for any grid size
+        C = w[None, :] * np.cos((np.pi / (n - 1)) * (np.outer(r, m) % (2 * (n - 1))))
+        rec = np.tensordot(rec, C, axes=([0], [1]))          # this axis becomes the last
+    return rec
+
+
 def _sup_cut(f, b, axes, E, P, target):
     """The measured cut: ``(j, err)`` of the smallest ladder index ``j`` whose truncated
     series is within ``target`` of ``K_R`` on every grid point of the flat region
@@ -342,13 +360,15 @@ def _sup_cut(f, b, axes, E, P, target):
         else:
             jpred = 2.0 * max(jmax, 1)
         return None, float(min(jpred, 4.0 * max(jmax, 1)) * step)
-    flat = np.ix_(*[np.flatnonzero(ax <= e * (1 + 1e-12)) for ax, e in zip(axes, E)])
-    scale = math.prod(2 * (n - 1) for n in b.shape)
-    fflat = f[flat]
+    rows = [np.flatnonzero(ax <= e * (1 + 1e-12)) for ax, e in zip(axes, E)]
+    fflat = f[np.ix_(*rows)]
+    pmax = float(max(P))
+    # the ladder's boxes per axis: coefficient m is in box j iff ceil(m·max P/Pₐ) <= j
+    box = [np.ceil(np.arange(n) * (pmax / Pa) - 1e-9) for n, Pa in zip(b.shape, P)]
 
     def err(j):
-        rec = sfft.idctn(np.where(shell <= j, b, 0.0) * scale, type=1)
-        return float(np.max(np.abs(rec[flat] - fflat)))
+        counts = [int(np.count_nonzero(bx <= j)) for bx in box]
+        return float(np.max(np.abs(truncated_series(b, counts, rows) - fflat)))
 
     # the ℓ1 tail bounds the sup error: its cut is an upper bound; bisect below it, first
     # probing 0.8 of it (the sup cut is usually close)
