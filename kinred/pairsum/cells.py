@@ -395,8 +395,7 @@ def _rows(s, z, c, top, kernel, bound, name):
     num = 0.0
     for a, e, q in _fastsum.row_blocks(s, rows):
         d = np.sqrt(q).ravel()
-        w = (cw[None, a:e] * np.sqrt(np.sum((z[a:e][None, :, :] - z[rows][:, None, :]) ** 2,
-                                            axis=2))).ravel()
+        w = (cw[None, a:e] * np.sqrt(_fastsum.sq_distances(z[rows], z[a:e]))).ravel()
         num += float(np.dot(np.abs(_fastsum._profile(kernel, d, name)), w))
         bins = np.minimum((d * (CUTOFF_BINS / top)).astype(np.int64), CUTOFF_BINS - 1)
         pos = d > 0.0
