@@ -99,7 +99,7 @@ def test_mixed_precision_table_equals_double_member_by_member():
     # the default precision ("mixed": float32 pair sums) against float64, on a reduced study
     from kinred.experiments import table1
 
-    kw = dict(N=100, G=8.0, ks=(25, 5), n_projections=3, betas=(1.5, 1.62), record_every=50)
+    kw = dict(N=100, G=8.0, ks=(25, 5), n_projections=2, betas=(1.5, 1.62), record_every=50)
     res = {p: table1.run(Table1Config.quick(precision=p, **kw), executor="serial", progress=False)
            for p in ("mixed", "double")}
     assert res["mixed"].counts == res["double"].counts
