@@ -158,6 +158,31 @@ def test_auto_derives_the_cell_lists_cutoff_once(monkeypatch):
     assert all(np.array_equal(a, b) for a, b in zip(got, alone))
 
 
+@pytest.mark.parametrize("first", ["finite", "nan"])
+def test_auto_passes_a_diverging_state_to_the_guard(first):
+    """A non-finite state (an integrator's stage of a diverging run) gets sums that carry the
+    NaN, by the last choice (or the first candidate that runs), and no new choice: pricing
+    it raised InvalidInput about the kernel's radial profile, which hid the divergence from
+    the integrator's guard."""
+    rng = np.random.default_rng(0)
+    n = 1500
+    x = rng.uniform(0, 1, (n, 3)) * np.array([29.0, 6.0, 1.7])
+    v = rng.normal(size=(n, 3))
+    scene = Scene([Alignment(CuckerSmale(0.8, 0.7)),
+                   AttractionRepulsion(Morse(0.5, 2.0, 1.0, 0.4, soft=0.3))])
+    auto = Auto()
+    plan = auto.plan(scene, n, 3)
+    if first == "finite":
+        auto.evaluate(plan, x, v)
+    chosen, decisions = plan.chosen, plan.decisions
+    bad = x.copy()
+    bad[5, 1] = np.nan
+    out = auto.evaluate(plan, bad, v)
+    assert any(np.isnan(o).any() for o in out.values())
+    assert (plan.chosen, plan.decisions) == (chosen, decisions)
+    assert auto.evaluate(plan, x, v)["v"].shape == (n, 3) and plan.chosen is not None
+
+
 def test_auto_max_seconds_option():
     assert repr(Auto(max_seconds=5.0)) == "Auto(tol=1e-06, max_seconds=5.0)"
     assert repr(Auto()) == "Auto(tol=1e-06)"

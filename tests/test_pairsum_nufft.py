@@ -421,15 +421,26 @@ def test_pairs_without_a_carrier_difference_do_not_set_the_accuracy_scale():
 
 
 @settings(max_examples=40, deadline=None)
-@given(k=st.integers(1, 3), seed=st.integers(0, 2**31), full=st.booleans())
-def test_truncated_series_is_the_inverse_dct_of_the_masked_coefficients(k, seed, full):
+@given(k=st.integers(1, 3), seed=st.integers(0, 2**31), full=st.booleans(),
+       route=st.sampled_from([0.0, math.inf, 48.0]))
+def test_truncated_series_is_the_inverse_dct_of_the_masked_coefficients(k, seed, full, route):
     """The grid's truncation error is measured on the flat region's points by a separable
-    sum (``_fastsum.truncated_series``); its twin is scipy's inverse DCT-I of the masked
+    sum (``_fastsum.truncated_series``: each axis by a matrix product or by its inverse DCT,
+    ``route`` the ratio between them); its twin is scipy's inverse DCT-I of the masked
     coefficients on the whole orthant."""
     from scipy import fft as sfft
 
     from kinred.pairsum import _fastsum
 
+    old = _fastsum.SERIES_MATRIX_RATIO
+    _fastsum.SERIES_MATRIX_RATIO = route
+    try:
+        _truncated_series_twin(k, seed, full, sfft, _fastsum)
+    finally:
+        _fastsum.SERIES_MATRIX_RATIO = old
+
+
+def _truncated_series_twin(k, seed, full, sfft, _fastsum):
     rng = np.random.default_rng(seed)
     shape = tuple(int(n) for n in rng.integers(2, 40 if k < 3 else 14, k))
     b = rng.standard_normal(shape) * np.exp(-0.2 * sum(np.ix_(*[np.arange(n) for n in shape])))

@@ -151,6 +151,12 @@ class Auto:
         state = {"x": x, "v": v}
         with plan.lock:
             ext = {s: np.ptp(state[s], axis=0) for s in plan.terms.sources}
+            if not all(np.all(np.isfinite(e)) for e in ext.values()):
+                # a diverging state (e.g. an integrator's stage): no choice is made on it;
+                # every candidate's sums carry the NaN to the integrator's guard (pricing
+                # it raised InvalidInput about the kernel's profile instead)
+                return plan.chosen if plan.chosen is not None else next(
+                    k for k, c in plan.candidates.items() if c[1] is not None)
             if plan.chosen is None or not _same_shape(ext, plan.ext):
                 plan.estimates = costs(plan, state, self.max_seconds)
                 plan.chosen = min(plan.estimates, key=lambda k: (plan.estimates[k], k != "dense"))
