@@ -453,3 +453,18 @@ def _truncated_series_twin(k, seed, full, sfft, _fastsum):
     got = _fastsum.truncated_series(b, counts, rows)
     assert got.shape == twin.shape
     assert np.max(np.abs(got - twin)) <= 1e-13 * np.sum(np.abs(b)) * 2 ** k
+
+
+@settings(max_examples=25, deadline=None)
+@given(k=st.integers(1, 6), seed=st.integers(0, 2**31), scale=st.sampled_from([1e-3, 1.0, 1e4]))
+def test_sq_distances_are_the_broadcast_sum_bit_for_bit(k, seed, scale):
+    """The rows of the field check and of the cell list's cutoff: coordinate by coordinate,
+    the bits of numpy's broadcast sum over the last axis (their cutoffs and checks did not
+    change when it replaced that sum)."""
+    from kinred.pairsum import _fastsum
+
+    rng = np.random.default_rng(seed)
+    p = rng.standard_normal((int(rng.integers(1, 40)), k)) * scale + 1e3 * scale
+    q = rng.standard_normal((int(rng.integers(1, 60)), k)) * scale + 1e3 * scale
+    assert np.array_equal(_fastsum.sq_distances(p, q),
+                          np.sum((q[None, :, :] - p[:, None, :]) ** 2, axis=2))
