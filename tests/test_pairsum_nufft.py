@@ -440,12 +440,27 @@ def test_truncated_series_is_the_inverse_dct_of_the_masked_coefficients(k, seed,
         _fastsum.SERIES_MATRIX_RATIO = old
 
 
-def _truncated_series_twin(k, seed, full, sfft, _fastsum):
+@pytest.mark.parametrize("shape", [(2000, 6), (6, 2000), (1500, 5, 3)])
+def test_truncated_series_mixes_its_two_routes_in_one_call(shape):
+    """A long axis by its inverse DCT and the short ones by matrix products, in one call (the
+    ratio's own choice), against the twin."""
+    from scipy import fft as sfft
+
+    from kinred.pairsum import _fastsum
+
+    _truncated_series_twin(len(shape), 7, False, sfft, _fastsum, shape=shape)
+
+
+def _truncated_series_twin(k, seed, full, sfft, _fastsum, shape=None):
     rng = np.random.default_rng(seed)
-    shape = tuple(int(n) for n in rng.integers(2, 40 if k < 3 else 14, k))
+    if shape is None:
+        shape = tuple(int(n) for n in rng.integers(2, 40 if k < 3 else 14, k))
     b = rng.standard_normal(shape) * np.exp(-0.2 * sum(np.ix_(*[np.arange(n) for n in shape])))
     counts = [n if full else int(rng.integers(1, n + 1)) for n in shape]
     rows = [np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)) for n in shape]
+    if max(shape) >= 1000:                          # the routes-mixing cases: a long axis
+        counts = [max(1, int(0.8 * n)) for n in shape]
+        rows = [np.arange(n) for n in shape]
     mask = np.zeros(shape, bool)
     mask[tuple(slice(0, c) for c in counts)] = True
     twin = sfft.idctn(np.where(mask, b, 0.0) * math.prod(2 * (n - 1) for n in shape),

@@ -243,9 +243,10 @@ def row_blocks(s: np.ndarray, rows: np.ndarray, elems: int = 1 << 20):
 
 def sq_distances(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """``|pᵢ − qⱼ|²``, shape ``(len(p), len(q))``: summed coordinate by coordinate in
-    coordinate order (the bits of ``np.sum((q[None] − p[:, None])**2, axis=2)``, whose
-    reduction over a short last axis took 0.4 of the 1.4 s of the cell list's cutoff rows
-    at N = 2000)."""
+    coordinate order -- for fewer than 8 coordinates (the callers have ``k ≤ 3``) the bits of
+    ``np.sum((q[None] − p[:, None])**2, axis=2)``, whose reduction over a short last axis took
+    0.4 of the 1.4 s of the cell list's cutoff rows at N = 2000 (numpy sums 8 or more
+    elements pairwise, in another order)."""
     out = np.zeros((p.shape[0], q.shape[0]))
     diff = np.empty_like(out)
     for c in range(p.shape[1]):
@@ -345,7 +346,7 @@ def _l1_tails(b, P):
 #: :func:`truncated_series` sums an axis as a matrix product while ``points × coefficients``
 #: is at most this many times ``L log₂ L`` (and :data:`SERIES_MATRIX_ELEMS`), else by the
 #: axis' inverse DCT: measured per axis, the product 1.3–3.8× faster at ratios 7–74, the DCT
-#: 3.7–12× faster at 144–190 (a 1-D grid of 10⁴ points would take 10⁸ products per point).
+#: 3.7–12× faster at 144–190 (a 1-D grid of 10⁴ points would take 10⁸ products in all).
 SERIES_MATRIX_RATIO = 48.0
 SERIES_MATRIX_ELEMS = 1 << 22
 
@@ -378,8 +379,9 @@ def truncated_series(b: np.ndarray, counts, rows) -> np.ndarray:
 def _sup_cut(f, b, axes, E, P, target):
     """The measured cut: ``(j, err)`` of the smallest ladder index ``j`` whose truncated
     series is within ``target`` of ``K_R`` on every grid point of the flat region
-    (``|rₐ| ≤ Eₐ``: the differences that occur), found by bisection on the inverse DCT-I of
-    the masked coefficients; ``(None, ξ_pred)`` when the ℓ1 content above 2/3 of the
+    (``|rₐ| ≤ Eₐ``: the differences that occur), found by bisection on the series of the
+    coefficients in the ladder's box ``j`` summed at those points (:func:`truncated_series`);
+    ``(None, ξ_pred)`` when the ℓ1 content above 2/3 of the
     sampling's Nyquist frequency exceeds ``target`` (aliasing not negligible), with
     ``ξ_pred`` an extrapolation of its exponential decay."""
     shell, tails, step, jmax = _l1_tails(b, P)

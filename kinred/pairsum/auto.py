@@ -152,11 +152,13 @@ class Auto:
         with plan.lock:
             ext = {s: np.ptp(state[s], axis=0) for s in plan.terms.sources}
             if not all(np.all(np.isfinite(e)) for e in ext.values()):
-                # a diverging state (e.g. an integrator's stage): no choice is made on it;
+                # non-finite positions (a diverging run's stage): no choice is made on them;
                 # every candidate's sums carry the NaN to the integrator's guard (pricing
-                # it raised InvalidInput about the kernel's profile instead)
+                # them raised InvalidInput about the kernel's profile instead). Before any
+                # choice, a candidate that returns the NaN without summing (the cell list and
+                # the NUFFT test the positions first; Dense would sum every pair)
                 return plan.chosen if plan.chosen is not None else next(
-                    k for k, c in plan.candidates.items() if c[1] is not None)
+                    k for k in ("cells", "nufft", "dense") if plan.candidates[k][1] is not None)
             if plan.chosen is None or not _same_shape(ext, plan.ext):
                 plan.estimates = costs(plan, state, self.max_seconds)
                 plan.chosen = min(plan.estimates, key=lambda k: (plan.estimates[k], k != "dense"))
