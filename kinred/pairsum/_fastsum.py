@@ -313,13 +313,19 @@ def _orthant(phi, E, t, xt, C, P, L, name):
     return f, sfft.dctn(f, type=1) / math.prod(2 * (La - 1) for La in L), axes
 
 
-def _shells(shape, P) -> np.ndarray:
-    """Shell index of each orthant coefficient on the ladder ``ξⱼ = j·2π/max P``: the smallest
-    ``j`` whose box ``|mₐ| ≤ ⌊j Pₐ/max P⌋`` contains it."""
+def _axis_shells(shape, P) -> list:
+    """Per axis, the shell of each coefficient index ``m`` on the ladder ``ξⱼ = j·2π/max P``:
+    the smallest ``j`` with ``m ≤ ⌊j Pₐ/max P⌋`` (non-decreasing in ``m``)."""
     pmax = float(max(P))
+    return [np.ceil(np.arange(n) * (pmax / Pa) - 1e-9).astype(np.int64)
+            for n, Pa in zip(shape, P)]
+
+
+def _shells(shape, P) -> np.ndarray:
+    """Shell index of each orthant coefficient: the smallest ``j`` whose box
+    ``|mₐ| ≤ ⌊j Pₐ/max P⌋`` contains it (the largest of its axes' shells)."""
     shell = np.zeros((1,) * len(shape), dtype=np.int64)
-    for a, n in enumerate(shape):
-        m = np.ceil(np.arange(n) * (pmax / P[a]) - 1e-9).astype(np.int64)
+    for a, m in enumerate(_axis_shells(shape, P)):
         sh = [1] * len(shape)
         sh[a] = -1
         shell = np.maximum(shell, m.reshape(sh))
@@ -395,12 +401,10 @@ def _sup_cut(f, b, axes, E, P, target):
         return None, float(min(jpred, 4.0 * max(jmax, 1)) * step)
     rows = [np.flatnonzero(ax <= e * (1 + 1e-12)) for ax, e in zip(axes, E)]
     fflat = f[np.ix_(*rows)]
-    pmax = float(max(P))
-    # the ladder's boxes per axis: coefficient m is in box j iff ceil(m·max P/Pₐ) <= j
-    box = [np.ceil(np.arange(n) * (pmax / Pa) - 1e-9) for n, Pa in zip(b.shape, P)]
+    axis_shells = _axis_shells(b.shape, P)     # box j: on each axis, the m of shell <= j
 
     def err(j):
-        counts = [int(np.count_nonzero(bx <= j)) for bx in box]
+        counts = [int(np.count_nonzero(sh <= j)) for sh in axis_shells]
         return float(np.max(np.abs(truncated_series(b, counts, rows) - fflat)))
 
     # the ℓ1 tail bounds the sup error: its cut is an upper bound; bisect below it, first

@@ -268,12 +268,10 @@ def _cells_cost(plan: AutoPlan, state: dict, nt: int) -> float:
     # evaluation that follows the choice reuses them (they cost 0.3-0.7 s per term at
     # N = 5000, for the rows of term_cutoff)
     carriers = cell_carriers(sub, state)
-    with sub.lock:
-        radii = [source_cutoff(sub, src, np.ascontiguousarray(state[src.name],
-                                                              dtype=np.float64), carriers)
-                 for src in sub.sources]
-    for src, R in zip(sub.sources, radii):
-        s = np.asarray(state[src.name], dtype=float)
+    for src in sub.sources:
+        s = np.ascontiguousarray(state[src.name], dtype=np.float64)
+        with sub.lock:
+            R = source_cutoff(sub, src, s, carriers)
         if R == 0.0:
             continue
         frac = max(float(np.mean(_pair_d2(s) < R * R)), 1.0 / 4096)

@@ -393,9 +393,10 @@ def _rows(s, z, c, top, kernel, bound, name):
     edges = np.linspace(0.0, top, CUTOFF_BINS + 1)
     tail, wsum = np.zeros(CUTOFF_BINS), np.zeros(CUTOFF_BINS)
     num = 0.0
+    zr = z[rows]
     for a, e, q in _fastsum.row_blocks(s, rows):
         d = np.sqrt(q).ravel()
-        w = (cw[None, a:e] * np.sqrt(_fastsum.sq_distances(z[rows], z[a:e]))).ravel()
+        w = (cw[None, a:e] * np.sqrt(_fastsum.sq_distances(zr, z[a:e]))).ravel()
         num += float(np.dot(np.abs(_fastsum._profile(kernel, d, name)), w))
         bins = np.minimum((d * (CUTOFF_BINS / top)).astype(np.int64), CUTOFF_BINS - 1)
         pos = d > 0.0
