@@ -12,6 +12,12 @@ WARM_FAILED := make test: a kernel warm-up run failed (ignored: pytest compiles 
 # would compile kinred's modules from source where PYTHONDONTWRITEBYTECODE is set (about 0.5 s
 # each): compileall writes the bytecode once (__pycache__ is git-ignored).
 PYC_FAILED  := make test: compileall failed (ignored: modules compile on import)
+# pytest rewrites the assertions of every test module on import (about 8 s per process for
+# this suite) and caches the result as bytecode, which PYTHONDONTWRITEBYTECODE forbids: each
+# xdist worker would then rewrite them all again. pytest runs without it; a collection before
+# the suite writes the cache once.
+PYTEST := env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
+COLLECT_FAILED := make test: collecting the tests failed (the suite will say why)
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -38,11 +44,12 @@ demo: $(VENV)/.installed-base
 # says the command to run (kinred.report._browser.find_chromium is the one place that looks).
 test: $(VENV)/.installed-test chromium
 	@$(BIN)/python -m compileall -q -j 0 kinred tests >/dev/null || echo "$(PYC_FAILED)"
-	@echo "make test: compiling the numba kernels (two processes; cached for the suite)"
+	@echo "make test: compiling the numba kernels and the tests' assertions (two processes; cached for the suite)"
 	@$(BIN)/python tests/_warm_kernels.py demo w1 steps >/dev/null 2>&1 & pid=$$!; \
 	  $(BIN)/python tests/_warm_kernels.py fig4 twins >/dev/null 2>&1 || echo "$(WARM_FAILED)"; \
+	  $(PYTEST) --collect-only -q >/dev/null 2>&1 || echo "$(COLLECT_FAILED)"; \
 	  wait $$pid || echo "$(WARM_FAILED)"
-	$(BIN)/python -m pytest -n auto --dist worksteal --durations=15
+	$(PYTEST) -n auto --dist worksteal --durations=15
 
 chromium: $(VENV)/.installed-base
 	@$(BIN)/python -c "from kinred.report._browser import find_chromium as f; f()" 2>/dev/null || { \

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
 from kinred import _parallel
 from kinred._parallel import num_threads
-from kinred.pairsum import Dense, Numpy, _kernels
+from kinred.pairsum import Dense, Numpy, _kernels, dense
 
 
 def _pair_sums(scene, x, v, pairsum):
@@ -105,7 +105,8 @@ def _scenes():
 @pytest.mark.parametrize("precision", ["double", "mixed"])
 @pytest.mark.parametrize("dim", [1, 3, 4, 10, 60])
 @pytest.mark.parametrize("case", list(_scenes()), ids=[c[0] for c in _scenes()])
-def test_compiled_worker_equals_python_strip_loop(case, dim, precision):
+def test_compiled_worker_equals_python_strip_loop(case, dim, precision, monkeypatch):
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     name, effects, opts = case
     n = 150
     rng = np.random.default_rng(dim)
@@ -170,6 +171,7 @@ def test_blas_stays_single_threaded_inside_the_parallel_region(monkeypatch):
         return out
 
     monkeypatch.setattr(_kernels, "pair_strips", spy)
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     before = get()
     rng = np.random.default_rng(8)
     x, v = rng.uniform(0, 1, (400, 30)), rng.uniform(-1, 1, (400, 30))

@@ -11,7 +11,7 @@ from kinred.projection import jl_matrix
 from kinred.errors import InvalidInput, NotProjectable
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import centre, mean_velocity
-from kinred.pairsum import _kernels
+from kinred.pairsum import _kernels, dense
 
 
 def _data(N=60, d=5, seed=0):
@@ -30,7 +30,8 @@ SCENES = [
 @pytest.mark.parametrize("effects", SCENES, ids=range(len(SCENES)))
 @pytest.mark.parametrize("normalize", ["mean", "sum"])
 @pytest.mark.parametrize("threads", [1, 2])
-def test_fast_engine_equals_numpy_twin(effects, normalize, threads):
+def test_fast_engine_equals_numpy_twin(effects, normalize, threads, monkeypatch):
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     x, v = _data(97, 7)
     w = np.random.default_rng(5).uniform(0.5, 1.5, 97)
     w /= w.sum()
@@ -236,8 +237,9 @@ def test_weights_and_state_validation():
 
 @pytest.mark.parametrize("d", [2, 3, 4, 30])
 @pytest.mark.parametrize("threads", [1, 2])
-def test_default_strips_both_distance_paths_equal_twin(d, threads):
+def test_default_strips_both_distance_paths_equal_twin(d, threads, monkeypatch):
     # default strip layout (no block=): differences for d <= 3, Gram + fix-up above
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     x, v = _data(700, d, seed=d)
     x[3] = x[4]                                      # coincident agents
     effects = [Alignment(CuckerSmale(0.8, 1.62)), AttractionRepulsion(Morse(soft=0.1))]

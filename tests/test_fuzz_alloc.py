@@ -82,7 +82,8 @@ def _record_bytes(n_save, n, d, n_obs, n_states):
 
 
 def test_simulate_prices_its_records_exactly_before_the_run(monkeypatch):
-    sc = Scene([Alignment(CuckerSmale())])
+    # strips of 8 rows: the pair sums' workspace (7 KiB) stays below the records' limit
+    sc = Scene([Alignment(CuckerSmale())], block=8)
     x = np.random.default_rng(0).uniform(size=(40, 3))
     save = SaveAt(every=2, states=True)                                  # 10 steps: 5 + 2 points
     need = _record_bytes(7, 40, 3, 2, 2)

@@ -17,7 +17,7 @@ from kinred._parallel import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import SaveAt, simulate
 from kinred.observables import above_floor, gamma_floor, mean_velocity
-from kinred.pairsum import _kernels
+from kinred.pairsum import _kernels, dense
 
 
 def _data(N, d, seed=0):
@@ -39,7 +39,8 @@ def _rel(a, b):
 @pytest.mark.parametrize("effects", SCENES, ids=range(len(SCENES)))
 @pytest.mark.parametrize("d", [2, 9, 60])          # differences path (k <= 3) and Gram path
 @pytest.mark.parametrize("threads", [1, 2])
-def test_mixed_rhs_agrees_with_double_to_float32_accuracy(effects, d, threads):
+def test_mixed_rhs_agrees_with_double_to_float32_accuracy(effects, d, threads, monkeypatch):
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     x, v = _data(301, d, seed=d)
     w = np.random.default_rng(1).uniform(0.5, 1.5, 301)
     w /= w.sum()

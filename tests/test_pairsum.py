@@ -11,7 +11,7 @@ from kinred._parallel import num_threads
 from kinred.errors import InvalidInput
 from kinred.integrate import SaveAt, simulate
 from kinred.kinetic._solution import weighted_scene
-from kinred.pairsum import Dense, Numpy, PairSum, PairTerms, _kernels, as_pairsum
+from kinred.pairsum import Dense, Numpy, PairSum, PairTerms, _kernels, as_pairsum, dense
 
 
 class BruteForce:
@@ -112,7 +112,8 @@ class SpyDense(Dense):
         return super().plan(scene, n, dim)
 
 
-def test_plans_are_built_once_per_shape_and_thread_count():
+def test_plans_are_built_once_per_shape_and_thread_count(monkeypatch):
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
     spy = SpyDense()
     sc = Scene([Alignment(CuckerSmale(0.8, 1.62))], "sum", pairsum=spy)
     x, v = _data(50, 4)
@@ -262,3 +263,25 @@ def test_pair_terms_list_only_what_the_effects_call_for():
     x, v = _data(100, 3)
     Scene([Alignment(on="v")], block=25, pairsum=None).rhs(x, v)
     assert _kernels.COUNTERS["v"] == 4 and _kernels.COUNTERS["x"] == 0
+
+
+@pytest.mark.parametrize("n, dim, groups", [(200, 2, 1), (600, 2, 1), (1000, 2, 2), (100, 200, 1),
+                                             (400, 200, 2), (300, 25, 1), (700, 25, 2)])
+def test_small_right_hand_sides_run_in_one_thread(n, dim, groups, monkeypatch):
+    """Below PARALLEL_MIN_SECONDS of one-thread work (by the measured SERIAL_PAIR_NS model) a
+    right-hand side runs in one thread: the hand-off to a second one costs about 0.2 ms. The
+    sums are those of two threads to the round-off of their order."""
+    sc = Scene([Alignment(CuckerSmale(0.8, 1.62))], "sum")
+    terms = sc.pair_terms
+    assert (dense.serial_seconds(n, dim, terms) >= dense.PARALLEL_MIN_SECONDS) == (groups == 2)
+    x, v = _data(n, dim)
+    with num_threads(2):
+        plan = Dense().plan(sc, n, dim)
+        assert len(plan.groups) == groups
+        auto = sc.rhs(x, v)[1]
+        monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)
+        assert len(Dense().plan(sc, n, dim).groups) == 2
+        two = Scene([Alignment(CuckerSmale(0.8, 1.62))], "sum").rhs(x, v)[1]
+    with num_threads(1):
+        assert len(Dense().plan(sc, n, dim).groups) == 1
+    assert np.max(np.abs(auto - two)) <= 1e-12 * np.max(np.abs(two))
