@@ -32,7 +32,7 @@ from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args
 from .cells import CellList, cell_carriers, source_cutoff
-from .dense import Dense
+from .dense import PARALLEL_MIN_SECONDS, Dense, one_thread_seconds
 from .nufft import NUFFT, ensure_grid, group_estimate
 
 __all__ = ["Auto", "AutoPlan", "costs"]
@@ -210,8 +210,8 @@ def costs(plan: AutoPlan, state: dict, max_seconds: float = MAX_SECONDS) -> dict
     nt = max(1, _parallel.get_num_threads())
     out = {"dense": math.inf}
     if plan.candidates["dense"][1] is not None:
-        out["dense"] = _cost.dense_seconds(
-            n, dim, [None if t.compiled is None else t.compiled[0] for t in terms.terms]) / nt
+        secs = one_thread_seconds(n, dim, terms)
+        out["dense"] = secs / nt if secs >= PARALLEL_MIN_SECONDS else secs   # as Dense.plan
     if out["dense"] <= DENSE_ENOUGH:     # nothing to gain: do not build the others' grids
         out["nufft"] = out["cells"] = math.inf
         return out

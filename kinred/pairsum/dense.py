@@ -48,7 +48,7 @@ import numpy as np
 from .._validate import as_choice, as_float, as_int, check_alloc
 from .. import _parallel
 from ..errors import InvalidInput, TooLarge
-from . import _kernels
+from . import _cost, _kernels
 from ._base import PairTerms, check_plan_args
 from .strips import BIG_K, SMALL_K, STRIP_ELEMS  # noqa: F401  (the strip walker's constants)
 from .strips import _deal as _balance, _products as _pair_products, _row_strips as strips
@@ -68,13 +68,10 @@ PAIRS_PER_SECOND_COMPILED = 2e9
 PAIRS_PER_SECOND_NUMPY = 5e8
 #: Default ``max_seconds``: a right-hand side estimated (optimistically) beyond it is refused.
 MAX_SECONDS = 3600.0
-#: Measured one-thread cost of one pair of the compiled engine, ``a + b·dim`` nanoseconds per
-#: distance source (2-core VM, float64 and float32, dimensions 2–200; numpy kernels: 4× more).
-SERIAL_PAIR_NS = (2.6, 0.18)
-#: A right-hand side that one thread does in less than this (by :data:`SERIAL_PAIR_NS`) runs
-#: in one thread: handing half of it to a second thread costs about 0.2 ms (wake-up, a second
-#: accumulator), which two threads win back only from about 1 ms of work (docs/performance.md,
-#: "Threads for small N").
+#: A right-hand side that one thread does in less than this (by the cost model's
+#: :func:`~kinred.pairsum._cost.dense_seconds`) runs in one thread: handing half of it to a
+#: second thread costs about 0.2 ms (wake-up, a second accumulator), which two threads win
+#: back only from about 1 ms of work (docs/performance.md, "Threads for small N").
 PARALLEL_MIN_SECONDS = 8e-4
 
 _KIND_CODE = {"cs_halfint": _kernels.KIND_CS_HALFINT, "cs_pow": _kernels.KIND_CS_POW}
@@ -234,7 +231,7 @@ class Dense:
                            f"pairs) takes an estimated {_fmt_seconds(secs)} at best, more than "
                            f"max_seconds={self.max_seconds:g}; {_fits(dim)}")
         ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
-        nthreads = _parallel.get_num_threads() if serial_seconds(n, dim, terms) >= \
+        nthreads = _parallel.get_num_threads() if one_thread_seconds(n, dim, terms) >= \
             PARALLEL_MIN_SECONDS else 1
         st = strips(n, self.block, dim, nthreads, ft.itemsize)
         nthreads = min(nthreads, len(st))
@@ -306,21 +303,19 @@ def estimate_seconds(n: int, dim: int, terms: PairTerms) -> float:
     return len(terms.sources) * (n * (n - 1) / 2.0) * max(1.0, (dim + 1) / 4.0) / rate
 
 
-def serial_seconds(n: int, dim: int, terms: PairTerms) -> float:
-    """The measured model of one dense right-hand side on one thread: ``n(n − 1)/2`` pairs per
-    distance source at :data:`SERIAL_PAIR_NS` (4× that with numpy kernels). :meth:`Dense.plan`
-    runs a right-hand side below :data:`PARALLEL_MIN_SECONDS` in one thread.
+def one_thread_seconds(n: int, dim: int, terms: PairTerms) -> float:
+    """The cost model's seconds of one dense right-hand side on one engine thread
+    (:func:`kinred.pairsum._cost.dense_seconds`, by each term's compiled kind).
 
     Examples
     --------
     >>> from kinred.dynamics import Alignment, Scene
     >>> terms = Scene([Alignment()]).pair_terms
-    >>> round(serial_seconds(200, 2, terms) * 1e3, 3), round(serial_seconds(2000, 2, terms), 4)
-    (0.059, 0.0059)
+    >>> round(one_thread_seconds(200, 2, terms) * 1e3, 3), round(one_thread_seconds(2000, 2, terms), 4)
+    (0.078, 0.0078)
     """
-    a, b = SERIAL_PAIR_NS
-    slow = 1.0 if all(t.compiled is not None for t in terms.terms) else 4.0
-    return len(terms.sources) * (n * (n - 1) / 2.0) * (a + b * dim) * 1e-9 * slow
+    return _cost.dense_seconds(n, dim, [None if t.compiled is None else t.compiled[0]
+                                        for t in terms.terms])
 
 
 def _fmt_seconds(secs: float) -> str:
