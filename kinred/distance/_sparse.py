@@ -438,28 +438,12 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
     num_iter_max : network-simplex iterations per solve (default ``max(1e5, 50·edges)``).
     """
     t0 = time.perf_counter()
-    ka, kb = P.weights > 0, Q.weights > 0
-    paired = P.n == Q.n and bool(np.array_equal(P.weights, Q.weights))
-    X, a = np.ascontiguousarray(P.points[ka]), P.weights[ka]
-    Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
+    X, a, Y, b, paired = _positive_atoms(P, Q)
     n, m, d = X.shape[0], Y.shape[0], X.shape[1]
-    if n * m > _ALL_PAIRS and not is_assignment(a, b):
-        X, a, Y, b = _spatial_order(X, a, Y, b, paired)
     budget = _Budget(max_iter, default_max_edges(n, m, k) if max_edges is None
                      else int(max_edges), max_seconds, max_bytes, t0)
-    price(n, m, d, k, min(n * m, k * (n + m) + n + m), max_bytes)
     tm = {}
-    keys, coupling = _initial_keys(X, a, Y, b, k, paired)
-    trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
-    tm["graph"] = time.perf_counter() - t0
-    unpruned = None          # pruned: the coupling that makes the graph feasible if it is not
-    if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
-        s = time.perf_counter()
-        pruned = prune(X, a, Y, b, keys, budget.deadline, run_until=_child_or_none,
-                       search=_price_search(X, Y, trees, budget.deadline))
-        if pruned is not None:
-            keys, unpruned = pruned[0], coupling
-        tm["prices"] = time.perf_counter() - s
+    keys, unpruned, trees = _candidates(X, a, Y, b, k, paired, budget, tm)
     tm["solve"] = tm["certify"] = 0.0
     lower, upper, scale, reason, exact, it = -math.inf, math.inf, 0.0, "", False, 0
     stopped_first = False
@@ -497,22 +481,11 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                                                        "certificate")
             stopped_first = True
             break
-        s = time.perf_counter()
         upper = min(upper, up)
-        roundoff = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v))))
-        tiny = roundoff + 2 * noise
         try:
-            if trees[0] is not None:
-                up, lo, scale, n_open, new, noise = certify_repaired(
-                    X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, budget.deadline, tm,
-                    VIOLATORS_PER_ROW)
-                upper = min(upper, up)
-            else:
-                lo, scale, n_open, new = _certify(X, a, Y, b, u, v, plan, trees, tiny,
-                                                  budget.deadline)
-                tm["certify"] += time.perf_counter() - s
+            upper, lo, scale, n_open, new, noise = _certificate(
+                X, a, Y, b, u, v, plan, keys, trees, upper, noise, budget.deadline, tm)
         except OutOfTime:
-            tm["certify"] += time.perf_counter() - s
             if not late:
                 lower, scale = max(lower, _cheap_lower(X, a, Y, b, rng)), upper
                 reason = (f"the time budget max_seconds = {max_seconds:g} ran out during the "
@@ -548,6 +521,64 @@ def sparse_w1(P: Pts, Q: Pts, rng, *, k: int = DEFAULT_K, rtol: float | None = N
                          iterations=it, edges=int(keys.size),
                          seconds=time.perf_counter() - t0, reason=reason, timings=tm,
                          first_solve_stopped=stopped_first, solver=solver)
+
+
+def _positive_atoms(P: Pts, Q: Pts):
+    """``(X, a, Y, b, paired)``: the atoms of positive weight, contiguous, in a spatial order
+    when the problem is past all pairs (an assignment keeps its order); ``paired``: the
+    measures have equal sizes and weights."""
+    ka, kb = P.weights > 0, Q.weights > 0
+    paired = P.n == Q.n and bool(np.array_equal(P.weights, Q.weights))
+    X, a = np.ascontiguousarray(P.points[ka]), P.weights[ka]
+    Y, b = np.ascontiguousarray(Q.points[kb]), Q.weights[kb]
+    if X.shape[0] * Y.shape[0] > _ALL_PAIRS and not is_assignment(a, b):
+        X, a, Y, b = _spatial_order(X, a, Y, b, paired)
+    return X, a, Y, b, paired
+
+
+def _candidates(X, a, Y, b, k: int, paired: bool, budget: "_Budget", tm: dict):
+    """The first candidate graph after its memory preflight: ``(keys, unpruned, trees)``.
+
+    ``keys``: the edges (nearest neighbours of both sides and a feasible coupling), pruned by
+    the cost-scaling prices when large; ``unpruned``: that coupling's edges when the pruning
+    may have dropped them (added back if a solve finds the graph infeasible), else None;
+    ``trees``: the KD-trees of both sides (or ``(None, None)``). Times go to ``tm`` (the
+    graph's from the budget's start)."""
+    n, m, d = X.shape[0], Y.shape[0], X.shape[1]
+    price(n, m, d, k, min(n * m, k * (n + m) + n + m), budget.max_bytes)
+    keys, coupling = _initial_keys(X, a, Y, b, k, paired)
+    trees = (CTree(X), CTree(Y)) if use_tree(n, m, d) else (None, None)
+    tm["graph"] = time.perf_counter() - budget.t0
+    unpruned = None
+    if keys.size >= PRUNE_EDGES and not is_assignment(a, b):
+        s = time.perf_counter()
+        pruned = prune(X, a, Y, b, keys, budget.deadline, run_until=_child_or_none,
+                       search=_price_search(X, Y, trees, budget.deadline))
+        if pruned is not None:
+            keys, unpruned = pruned[0], coupling
+        tm["prices"] = time.perf_counter() - s
+    return keys, unpruned, trees
+
+
+def _certificate(X, a, Y, b, u, v, plan, keys, trees, upper, noise, deadline, tm):
+    """One round's certificate of the duals ``(u, v)``: ``(upper, lower, scale, open rows,
+    new edges, noise)``. With KD-trees the plan is repaired first (its cost may lower
+    ``upper``); :class:`OutOfTime` (its time counted in ``tm``) if the deadline passes."""
+    s = time.perf_counter()
+    roundoff = 4 * _EPS * (upper + float(np.max(np.abs(u))) + float(np.max(np.abs(v))))
+    try:
+        if trees[0] is not None:
+            up, lo, scale, n_open, new, noise = certify_repaired(
+                X, a, Y, b, u, v, plan, keys, trees, roundoff, noise, deadline, tm,
+                VIOLATORS_PER_ROW)
+            return min(upper, up), lo, scale, n_open, new, noise
+        lo, scale, n_open, new = _certify(X, a, Y, b, u, v, plan, trees, roundoff + 2 * noise,
+                                          deadline)
+    except OutOfTime:
+        tm["certify"] += time.perf_counter() - s
+        raise
+    tm["certify"] += time.perf_counter() - s
+    return upper, lo, scale, n_open, new, noise
 
 
 def _solve_round(X, a, Y, b, keys, num_iter_max, deadline):
