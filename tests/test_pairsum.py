@@ -265,7 +265,7 @@ def test_pair_terms_list_only_what_the_effects_call_for():
     assert _kernels.COUNTERS["v"] == 4 and _kernels.COUNTERS["x"] == 0
 
 
-@pytest.mark.parametrize("n, dim, groups", [(200, 2, 1), (400, 2, 1), (1000, 2, 2), (100, 200, 1),
+@pytest.mark.parametrize("n, dim, groups", [(200, 2, 1), (300, 2, 1), (1000, 2, 2), (100, 200, 1),
                                              (400, 200, 2), (300, 25, 1), (700, 25, 2)])
 def test_small_right_hand_sides_run_in_one_thread(n, dim, groups, monkeypatch):
     """Below PARALLEL_MIN_SECONDS of one-thread work (by the cost model's dense_seconds) a

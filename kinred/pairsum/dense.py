@@ -71,8 +71,8 @@ MAX_SECONDS = 3600.0
 #: A right-hand side that one thread does in less than this (by the cost model's
 #: :func:`~kinred.pairsum._cost.dense_seconds`) runs in one thread: handing half of it to a
 #: second thread costs about 0.2 ms (wake-up, a second accumulator), which two threads win
-#: back only from about 1 ms of work (docs/performance.md, "Threads for small N").
-PARALLEL_MIN_SECONDS = 8e-4
+#: back only from about 0.6 ms of work (docs/performance.md, "Threads for small N").
+PARALLEL_MIN_SECONDS = 6e-4
 
 _KIND_CODE = {"cs_halfint": _kernels.KIND_CS_HALFINT, "cs_pow": _kernels.KIND_CS_POW}
 
