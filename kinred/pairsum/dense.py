@@ -21,7 +21,8 @@ L2), for each distance source the scene needs (``x`` and/or ``v``, never one it 
 
 With ``n`` engine threads (:func:`~kinred.dynamics.set_num_threads`) the strips are dealt
 out to ``n`` threads (the calling thread and ``n − 1`` pooled ones; BLAS runs one thread per
-engine thread), each with its own accumulator. When every term's kernel has a compiled form,
+engine thread), each with its own accumulator; a right-hand side estimated below
+:data:`PARALLEL_MIN_SECONDS` on one thread runs in one (the hand-off costs more). When every term's kernel has a compiled form,
 a thread's whole share (steps 1–3 for all its strips) is one compiled call that holds no GIL
 (``_kernels.pair_strips``, BLAS called from numba); otherwise a Python loop makes the same
 calls strip by strip, and each call's GIL hand-back can wait for the other thread.
@@ -221,7 +222,8 @@ class Dense:
     # ------------------------------------------------------------------ plan
     def plan(self, scene, n: int, dim: int) -> DensePlan:
         """The plan of ``scene`` for states of shape ``(n, dim)`` with the current engine
-        threads (see :class:`~kinred.pairsum.PairSum`)."""
+        threads, or one below :data:`PARALLEL_MIN_SECONDS` of work (see
+        :class:`~kinred.pairsum.PairSum`)."""
         terms, n, dim = check_plan_args(scene, n, dim)
         forms = [t.compiled for t in terms.terms]
         secs = estimate_seconds(n, dim, terms)
