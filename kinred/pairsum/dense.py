@@ -222,7 +222,7 @@ class Dense:
     # ------------------------------------------------------------------ plan
     def plan(self, scene, n: int, dim: int) -> DensePlan:
         """The plan of ``scene`` for states of shape ``(n, dim)`` with the current engine
-        threads, or one below :data:`PARALLEL_MIN_SECONDS` of work (see
+        threads, or one below ``dense.PARALLEL_MIN_SECONDS`` of work (see
         :class:`~kinred.pairsum.PairSum`)."""
         terms, n, dim = check_plan_args(scene, n, dim)
         forms = [t.compiled for t in terms.terms]
