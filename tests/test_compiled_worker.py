@@ -107,6 +107,7 @@ def _scenes():
 @pytest.mark.parametrize("case", list(_scenes()), ids=[c[0] for c in _scenes()])
 def test_compiled_worker_equals_python_strip_loop(case, dim, precision, monkeypatch):
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     name, effects, opts = case
     n = 150
     rng = np.random.default_rng(dim)
@@ -172,6 +173,7 @@ def test_blas_stays_single_threaded_inside_the_parallel_region(monkeypatch):
 
     monkeypatch.setattr(_kernels, "pair_strips", spy)
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     before = get()
     rng = np.random.default_rng(8)
     x, v = rng.uniform(0, 1, (400, 30)), rng.uniform(-1, 1, (400, 30))

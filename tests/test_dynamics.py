@@ -32,6 +32,7 @@ SCENES = [
 @pytest.mark.parametrize("threads", [1, 2])
 def test_fast_engine_equals_numpy_twin(effects, normalize, threads, monkeypatch):
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     x, v = _data(97, 7)
     w = np.random.default_rng(5).uniform(0.5, 1.5, 97)
     w /= w.sum()
@@ -240,6 +241,7 @@ def test_weights_and_state_validation():
 def test_default_strips_both_distance_paths_equal_twin(d, threads, monkeypatch):
     # default strip layout (no block=): differences for d <= 3, Gram + fix-up above
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     x, v = _data(700, d, seed=d)
     x[3] = x[4]                                      # coincident agents
     effects = [Alignment(CuckerSmale(0.8, 1.62)), AttractionRepulsion(Morse(soft=0.1))]

@@ -41,6 +41,7 @@ def _rel(a, b):
 @pytest.mark.parametrize("threads", [1, 2])
 def test_mixed_rhs_agrees_with_double_to_float32_accuracy(effects, d, threads, monkeypatch):
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     x, v = _data(301, d, seed=d)
     w = np.random.default_rng(1).uniform(0.5, 1.5, 301)
     w /= w.sum()

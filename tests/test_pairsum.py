@@ -114,6 +114,7 @@ class SpyDense(Dense):
 
 def test_plans_are_built_once_per_shape_and_thread_count(monkeypatch):
     monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)   # two threads even at this size
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     spy = SpyDense()
     sc = Scene([Alignment(CuckerSmale(0.8, 1.62))], "sum", pairsum=spy)
     x, v = _data(50, 4)
@@ -285,3 +286,25 @@ def test_small_right_hand_sides_run_in_one_thread(n, dim, groups, monkeypatch):
     with num_threads(1):
         assert len(Dense().plan(sc, n, dim).groups) == 1
     assert np.max(np.abs(auto - two)) <= 1e-12 * np.max(np.abs(two))
+
+
+@pytest.mark.parametrize("n, groups", [(300, 1), (600, 1), (1500, 2)])
+def test_the_python_strip_loop_shares_from_more_work(n, groups, monkeypatch):
+    """Morse (no compiled form) runs in the Python strip loop, whose calls hand the GIL back:
+    two threads only from PARALLEL_MIN_SECONDS_LOOP of one-thread work (the compiled worker
+    shares from PARALLEL_MIN_SECONDS, a tenth of it); Auto prices it with those threads."""
+    sc = Scene([AttractionRepulsion(Morse(soft=0.1))], "sum")
+    terms = sc.pair_terms
+    secs = dense.one_thread_seconds(n, 2, terms)
+    assert secs >= dense.PARALLEL_MIN_SECONDS                 # the compiled rule would share
+    assert (secs >= dense.PARALLEL_MIN_SECONDS_LOOP) == (groups == 2)
+    x, v = _data(n, 2)
+    with num_threads(2):
+        assert len(Dense().plan(sc, n, 2).groups) == groups
+        assert dense.engine_threads(n, 2, terms, compiled=False) == groups
+        auto = Scene([AttractionRepulsion(Morse(soft=0.1))], "sum", pairsum="auto")
+        auto.rhs(x, v)
+        plan = next(iter(auto._plans.values()))
+        assert plan.estimates["dense"] == pytest.approx(secs / groups)
+        monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
+        assert len(Dense().plan(sc, n, 2).groups) == 2

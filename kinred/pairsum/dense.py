@@ -22,7 +22,8 @@ L2), for each distance source the scene needs (``x`` and/or ``v``, never one it 
 With ``n`` engine threads (:func:`~kinred.dynamics.set_num_threads`) the strips are dealt
 out to ``n`` threads (the calling thread and ``n − 1`` pooled ones; BLAS runs one thread per
 engine thread), each with its own accumulator; a right-hand side estimated below
-:data:`PARALLEL_MIN_SECONDS` on one thread runs in one (the hand-off costs more). When every term's kernel has a compiled form,
+:data:`PARALLEL_MIN_SECONDS` on one thread (:data:`PARALLEL_MIN_SECONDS_LOOP` for the Python
+strip loop) runs in one (the hand-off costs more). When every term's kernel has a compiled form,
 a thread's whole share (steps 1–3 for all its strips) is one compiled call that holds no GIL
 (``_kernels.pair_strips``, BLAS called from numba); otherwise a Python loop makes the same
 calls strip by strip, and each call's GIL hand-back can wait for the other thread.
@@ -74,6 +75,10 @@ MAX_SECONDS = 3600.0
 #: second thread costs about 0.2 ms (wake-up, a second accumulator), which two threads win
 #: back only from about 0.6 ms of work (docs/performance.md, "Threads for small N").
 PARALLEL_MIN_SECONDS = 6e-4
+#: The same for the Python strip loop (a kernel without compiled form, e.g. Morse): each of
+#: its 6–10 calls per strip hands the GIL back to the other thread, so two threads win only
+#: from about 5 ms of one-thread work on (at N = 200 they were 4.7× slower than one).
+PARALLEL_MIN_SECONDS_LOOP = 5e-3
 
 _KIND_CODE = {"cs_halfint": _kernels.KIND_CS_HALFINT, "cs_pow": _kernels.KIND_CS_POW}
 
@@ -222,7 +227,7 @@ class Dense:
     # ------------------------------------------------------------------ plan
     def plan(self, scene, n: int, dim: int) -> DensePlan:
         """The plan of ``scene`` for states of shape ``(n, dim)`` with the current engine
-        threads, or one below ``dense.PARALLEL_MIN_SECONDS`` of work (see
+        threads, or one for a small one (``dense.engine_threads``; see
         :class:`~kinred.pairsum.PairSum`)."""
         terms, n, dim = check_plan_args(scene, n, dim)
         forms = [t.compiled for t in terms.terms]
@@ -233,8 +238,9 @@ class Dense:
                            f"pairs) takes an estimated {_fmt_seconds(secs)} at best, more than "
                            f"max_seconds={self.max_seconds:g}; {_fits(dim)}")
         ft = np.dtype(np.float32 if self.precision == "mixed" else np.float64)
-        nthreads = _parallel.get_num_threads() if one_thread_seconds(n, dim, terms) >= \
-            PARALLEL_MIN_SECONDS else 1
+        use_worker = (self.compiled and _kernels.HAVE_COMPILED_FOR.get(ft, False)
+                      and all(f is not None for f in forms))
+        nthreads = engine_threads(n, dim, terms, use_worker)
         st = strips(n, self.block, dim, nthreads, ft.itemsize)
         nthreads = min(nthreads, len(st))
         small = dim <= SMALL_K
@@ -249,8 +255,6 @@ class Dense:
         check_alloc(nbytes, f"Dense: the workspace of the pair sums of {n} agents in dimension "
                     f"{dim}", _fits(dim))
         groups = _balance(st, n, nthreads)
-        use_worker = (self.compiled and _kernels.HAVE_COMPILED_FOR.get(ft, False)
-                      and all(f is not None for f in forms))
         return DensePlan(
             n=n, dim=dim, terms=terms, c=scene.coefficients(n), dtype=ft, strips=tuple(st),
             groups=groups, small=small, centred=centred, maxel=maxel, need_phi=need_phi,
@@ -318,6 +322,15 @@ def one_thread_seconds(n: int, dim: int, terms: PairTerms) -> float:
     """
     return _cost.dense_seconds(n, dim, [None if t.compiled is None else t.compiled[0]
                                         for t in terms.terms])
+
+
+def engine_threads(n: int, dim: int, terms: PairTerms, compiled: bool = True) -> int:
+    """The threads of one dense right-hand side: the engine's
+    (:func:`~kinred.dynamics.set_num_threads`), or one when :func:`one_thread_seconds` is
+    below :data:`PARALLEL_MIN_SECONDS` (the compiled strip worker, ``compiled``) or
+    :data:`PARALLEL_MIN_SECONDS_LOOP` (the Python strip loop)."""
+    least = PARALLEL_MIN_SECONDS if compiled else PARALLEL_MIN_SECONDS_LOOP
+    return _parallel.get_num_threads() if one_thread_seconds(n, dim, terms) >= least else 1
 
 
 def _fmt_seconds(secs: float) -> str:
