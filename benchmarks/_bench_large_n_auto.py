@@ -1,8 +1,8 @@
 """Section ``auto`` of ``bench_large_n.py``: the cases of issue 24 on ``pairsum="auto"``.
 
 Rows (each one process run; the first call of a backend builds its grids/cells and is
-reported apart from the per-step cost; a row against Dense reports the best of at least
-:data:`RATIO_REPEAT` further calls of each):
+reported apart from the per-step cost; a row against Dense reports the best of the first call
+and at least :data:`RATIO_REPEAT` further calls of each):
 
 1. Dense refuses N = 10⁷ in 2-D before any work (seconds to the refusal);
 2. 2-D D'Orsogna ring (radius 5 and 20, Morse Ca = 0.5, la = 2, Cr = 1, lr = 0.5,

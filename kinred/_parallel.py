@@ -2,8 +2,8 @@
 
 * the thread count (:func:`set_num_threads`, :func:`get_num_threads`, :func:`num_threads`):
   the row strips of one simulation (:mod:`kinred.dynamics`) and the row chunks of a batched
-  ℓ1 solve (:mod:`kinred.recovery`) run in that many threads (a dense right-hand side of
-  less than ``kinred.pairsum.dense.PARALLEL_MIN_SECONDS`` in one); ensemble members use one;
+  ℓ1 solve (:mod:`kinred.recovery`) run in that many threads (a dense right-hand side too
+  small to share, ``kinred.pairsum.dense.engine_threads``, in one); ensemble members use one;
 * :func:`run_parallel`: one parallel region (group 0 in the calling thread, the others in a
   shared pool) with BLAS single-threaded until every group has finished;
 * :func:`blas_threads`: numpy's OpenBLAS thread count for the duration of a ``with`` block;
@@ -104,8 +104,8 @@ def set_num_threads(n: int) -> None:
 
     The row strips of the dynamics engine and the row chunks of
     :func:`kinred.recovery.basis_pursuit` / :func:`~kinred.recovery.lasso` run in ``n``
-    threads (a dense right-hand side too small to share, below
-    ``kinred.pairsum.dense.PARALLEL_MIN_SECONDS`` on one thread, in one). With ``n = 1`` they
+    threads (a dense right-hand side too small to share, ``kinred.pairsum.dense.engine_threads``:
+    below 0.6 ms of one-thread work, 5 ms without compiled kernels, in one). With ``n = 1`` they
     are single-threaded, including the BLAS calls they make: an
     ensemble can then run one simulation per core (:func:`kinred.ensemble.run_ensemble` runs
     every member with one thread). The default is ``min(cpu_count, 2)``.

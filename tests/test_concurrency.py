@@ -13,7 +13,7 @@ import pytest
 from kinred.dynamics import Alignment, AttractionRepulsion, CuckerSmale, Morse, Scene
 from kinred.integrate import SaveAt, simulate
 from kinred import _parallel
-from kinred.pairsum import Dense
+from kinred.pairsum import Dense, dense
 
 _kernels = importlib.import_module("kinred.pairsum._kernels")
 scene_mod = importlib.import_module("kinred.dynamics.scene")
@@ -68,6 +68,9 @@ def test_threads_simulating_one_scene_match_serial_runs_and_count_exactly(name, 
     """Main lost strip counts (and built plans twice, see below); the numbers must be bit for
     bit those of the serial runs, and the counters exactly twice the serial totals."""
     monkeypatch.setattr(_kernels, "COUNTERS", _YieldingCounter())
+    # two-group regions even at these sizes (their pool is what the concurrent runs share)
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)
+    monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
     sizes = [24, 25, 26, 27, 28, 29]       # more shapes than the cache keeps: plans are evicted
     with _parallel.num_threads(2):
         sc = _scenes()[name]

@@ -278,9 +278,11 @@ def test_small_right_hand_sides_run_in_one_thread(n, dim, groups, monkeypatch):
     x, v = _data(n, dim)
     with num_threads(2):
         plan = Dense().plan(sc, n, dim)
-        assert len(plan.groups) == groups
+        assert dense.engine_threads(n, dim, terms, compiled=True) == groups
+        assert len(plan.groups) == dense.engine_threads(n, dim, terms, plan.worker is not None)
         auto = sc.rhs(x, v)[1]
         monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS", 0.0)
+        monkeypatch.setattr(dense, "PARALLEL_MIN_SECONDS_LOOP", 0.0)
         assert len(Dense().plan(sc, n, dim).groups) == 2
         two = Scene([Alignment(CuckerSmale(0.8, 1.62))], "sum").rhs(x, v)[1]
     with num_threads(1):

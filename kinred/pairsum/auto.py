@@ -32,7 +32,7 @@ from ..errors import InvalidInput, TooLarge
 from . import _cost, _fastsum
 from ._base import PairTerms, check_plan_args
 from .cells import CellList, cell_carriers, source_cutoff
-from .dense import Dense, engine_threads, one_thread_seconds
+from .dense import Dense, one_thread_seconds
 from .nufft import NUFFT, ensure_grid, group_estimate
 
 __all__ = ["Auto", "AutoPlan", "costs"]
@@ -210,8 +210,8 @@ def costs(plan: AutoPlan, state: dict, max_seconds: float = MAX_SECONDS) -> dict
     nt = max(1, _parallel.get_num_threads())
     out = {"dense": math.inf}
     if plan.candidates["dense"][1] is not None:
-        out["dense"] = one_thread_seconds(n, dim, terms) / engine_threads(
-            n, dim, terms, all(t.compiled is not None for t in terms.terms))   # as Dense.plan
+        # the threads its plan runs in (dense.engine_threads: one for a small right-hand side)
+        out["dense"] = one_thread_seconds(n, dim, terms) / len(plan.candidates["dense"][1].groups)
     if out["dense"] <= DENSE_ENOUGH:     # nothing to gain: do not build the others' grids
         out["nufft"] = out["cells"] = math.inf
         return out

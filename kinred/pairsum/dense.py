@@ -181,7 +181,10 @@ class Dense:
         keep about 6 digits). Accuracy measured on the paper's runs: docs/dynamics.md.
     compiled : bool
         Run a thread's strips as one compiled call when every kernel has a compiled form
-        (default True); False forces the Python strip loop (same operations), for comparison.
+        (default True); False forces the Python strip loop (same operations), for comparison
+        (its threshold for sharing a right-hand side between threads is higher,
+        :data:`PARALLEL_MIN_SECONDS_LOOP`, so below it the strips, and the round-off, may
+        differ from the compiled run's).
     max_seconds : float
         :meth:`plan` refuses (:class:`~kinred.errors.TooLarge`, before any work) a size whose
         estimated time per right-hand side exceeds it (default one hour). The estimate
@@ -317,8 +320,8 @@ def one_thread_seconds(n: int, dim: int, terms: PairTerms) -> float:
     --------
     >>> from kinred.dynamics import Alignment, Scene
     >>> terms = Scene([Alignment()]).pair_terms
-    >>> round(one_thread_seconds(200, 2, terms) * 1e3, 3), round(one_thread_seconds(2000, 2, terms), 4)
-    (0.078, 0.0078)
+    >>> [round(one_thread_seconds(n, 2, terms) * 1e3, 3) for n in (200, 2000)]   # ms
+    [0.078, 7.796]
     """
     return _cost.dense_seconds(n, dim, [None if t.compiled is None else t.compiled[0]
                                         for t in terms.terms])
