@@ -183,7 +183,7 @@ class Dense:
         Run a thread's strips as one compiled call when every kernel has a compiled form
         (default True); False forces the Python strip loop (same operations), for comparison
         (its threshold for sharing a right-hand side between threads is higher,
-        :data:`PARALLEL_MIN_SECONDS_LOOP`, so below it the strips, and the round-off, may
+        ``dense.PARALLEL_MIN_SECONDS_LOOP``, so below it the strips, and the round-off, may
         differ from the compiled run's).
     max_seconds : float
         :meth:`plan` refuses (:class:`~kinred.errors.TooLarge`, before any work) a size whose
