@@ -105,6 +105,14 @@ def _holder(folder) -> subprocess.Popen:
     return p
 
 
+def _stop(p: subprocess.Popen) -> None:
+    """Kill the child and close its pipes: ``wait`` alone leaves them open, and their
+    ResourceWarning at a later garbage collection fails whichever test turns warnings into
+    errors at that moment."""
+    p.kill()
+    p.communicate()
+
+
 def _files(folder):
     return sorted(p.relative_to(folder).as_posix() for p in Path(folder).rglob("*"))
 
@@ -125,14 +133,13 @@ def test_a_second_process_is_refused_naming_the_holder(tmp_path):
             StageStore(tmp_path, "d1")
         assert _files(tmp_path) == before == [LOCK_NAME]
     finally:
-        p.kill()
-        p.wait()
+        _stop(p)
 
 
 def test_the_lock_of_a_killed_process_is_taken_over(tmp_path):
     p = _holder(tmp_path)
     os.kill(p.pid, signal.SIGKILL)
-    p.wait()
+    p.communicate()                 # waits, and closes the pipes (no ResourceWarning later)
     assert (tmp_path / LOCK_NAME).is_file()                   # left behind by SIGKILL
     lock = lock_folder(tmp_path)
     try:
@@ -279,8 +286,7 @@ def test_kinetic_run_api_owns_its_folder(tmp_path):
             kinetic_run.run(cfg, out_dir=tmp_path / "R", figures=False)
         assert _files(tmp_path / "R") == [LOCK_NAME]
     finally:
-        p.kill()
-        p.wait()
+        _stop(p)
     # the stale lock is taken over
     res = kinetic_run.run(cfg, out_dir=tmp_path / "R", figures=False)
     assert set(res.stages.values()) == {"computed"}
