@@ -658,3 +658,34 @@ def test_roundoff_helpers():
     assert ax == pytest.approx(2 * (u * (0.1 + 2.0) + 2 * u * (2.0 + 2.0 + 0.1)), rel=1e-12)
     assert av == pytest.approx(2 * (u * (0.3 + 1.0) + 2 * u * (1.0 + 1.0 + 0.3) + 0.1 * 2e-13),
                                rel=1e-12)
+
+
+@pytest.mark.parametrize("N, nterms, threads", [(150, 1, 1), (250, 1, 2), (80, 5, 1), (120, 5, 2)])
+def test_the_pass_shares_its_strips_from_the_dense_engines_threshold(N, nterms, threads,
+                                                                     monkeypatch):
+    """The pass runs in one thread below dense.PARALLEL_MIN_SECONDS of estimated one-thread
+    work (PASS_PAIR_TERM_SECONDS per pair and term), in the engine's threads above it; the
+    aggregates of one and two threads agree to the round-off of their order."""
+    from kinred.pairsum import dense
+    from kinred._parallel import num_threads
+
+    est = N * (N - 1) / 2 * nterms * _aggregates.PASS_PAIR_TERM_SECONDS
+    assert (est >= dense.PARALLEL_MIN_SECONDS) == (threads == 2)
+    pts, c, terms, bz, bs = _pass_inputs(N, 2, N)
+    fast = [t for t in terms if t.kind][:nterms]
+    rnd = (3e-14, 4e-15, 1e-12)
+    seen = []
+    real = _aggregates._parallel.run_parallel
+    monkeypatch.setattr(_aggregates._parallel, "run_parallel",
+                        lambda fn, groups: seen.append(len(groups)) or real(fn, groups))
+    with num_threads(2):
+        assert _aggregates.pass_threads(N, nterms) == threads
+        a, fa = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+        assert seen == [threads]
+    with num_threads(1):
+        b, fb = _aggregates.pair_pass(pts, c, fast, bz, bs, 1e-9, rnd)
+    for x, y in zip(a, b):
+        A, B = x.stack(), y.stack()
+        fin = np.isfinite(B)
+        assert np.array_equal(np.isfinite(A), fin)
+        assert np.max(np.abs(A[fin] - B[fin]) / np.maximum(np.abs(B[fin]), 1e-300)) < 1e-12

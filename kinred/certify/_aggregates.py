@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _parallel
+from ..pairsum import dense as _dense
 from ..pairsum import strips as _dyn
 from ..pairsum.strips import SMALL_K as _SMALL_K, deal as _balance, pair_products as _pair_products
 from ..pairsum.strips import row_strips as _strips
@@ -53,8 +54,20 @@ _COMPILED = bool(_dyn.HAVE_COMPILED_FOR[np.dtype(np.float64)])
 
 __all__ = ["TermAgg", "pair_pass", "pair_pass_numpy"]
 
-#: Agents from which the compiled pass deals its strips to the engine's threads.
-_MIN_PARALLEL = 400
+#: One thread's seconds per pair and term of the pass (2-core VM, k = 2 and 10, 1–5 terms:
+#: 24–33 ns). The pass deals its strips to the engine's threads from the dense engine's
+#: thresholds on (``dense.PARALLEL_MIN_SECONDS``, ``PARALLEL_MIN_SECONDS_LOOP`` without the
+#: compiled call): one term shares from about 210 agents, five from about 100.
+PASS_PAIR_TERM_SECONDS = 2.7e-8
+
+
+def pass_threads(n: int, terms: int) -> int:
+    """The threads of a pass over the pairs of ``n`` agents with ``terms`` terms: the
+    engine's, or one when its one-thread estimate is below the dense engine's threshold (the
+    hand-off costs more than it shares)."""
+    least = _dense.PARALLEL_MIN_SECONDS if _COMPILED else _dense.PARALLEL_MIN_SECONDS_LOOP
+    secs = n * (n - 1) / 2.0 * max(terms, 1) * PASS_PAIR_TERM_SECONDS
+    return _parallel.get_num_threads() if secs >= least else 1
 
 _ROWS = ("dsum", "dneg", "amv", "kr", "kmv", "mag_true", "rowmin", "s2", "mag_run")
 
@@ -321,8 +334,7 @@ def _fast_pass(pts, c, fast, bz, bs, margin, rnd, block, ws=None):
     n = c.shape[0]
     k = next(iter(pts.values())).shape[1]
     sp = _prepare(pts, c, fast, bz, bs, ws)
-    # below a few hundred agents a thread hand-off costs more than the work it shares
-    nthreads = _parallel.get_num_threads() if n >= _MIN_PARALLEL else 1
+    nthreads = pass_threads(n, len(fast))
     strips = _strips(n, block, k, nthreads)
     nthreads = min(nthreads, len(strips))
     maxel = max((i1 - i0) * (n - i0) for i0, i1 in strips)
