@@ -62,12 +62,10 @@ PASS_PAIR_TERM_SECONDS = 2.7e-8
 
 
 def pass_threads(n: int, terms: int) -> int:
-    """The threads of a pass over the pairs of ``n`` agents with ``terms`` terms: the
-    engine's, or one when its one-thread estimate is below the dense engine's threshold (the
-    hand-off costs more than it shares)."""
-    least = _dense.PARALLEL_MIN_SECONDS if _COMPILED else _dense.PARALLEL_MIN_SECONDS_LOOP
-    secs = n * (n - 1) / 2.0 * max(terms, 1) * PASS_PAIR_TERM_SECONDS
-    return _parallel.get_num_threads() if secs >= least else 1
+    """The threads of a pass over the pairs of ``n`` agents with ``terms`` terms: the dense
+    engine's rule (``dense.threads_for``) on the pass's one-thread estimate."""
+    return _dense.threads_for(n * (n - 1) / 2.0 * max(terms, 1) * PASS_PAIR_TERM_SECONDS,
+                              _COMPILED)
 
 _ROWS = ("dsum", "dneg", "amv", "kr", "kmv", "mag_true", "rowmin", "s2", "mag_run")
 

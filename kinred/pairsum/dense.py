@@ -327,13 +327,20 @@ def one_thread_seconds(n: int, dim: int, terms: PairTerms) -> float:
                                         for t in terms.terms])
 
 
-def engine_threads(n: int, dim: int, terms: PairTerms, compiled: bool = True) -> int:
-    """The threads of one dense right-hand side: the engine's
-    (:func:`~kinred.dynamics.set_num_threads`), or one when :func:`one_thread_seconds` is
-    below :data:`PARALLEL_MIN_SECONDS` (the compiled strip worker, ``compiled``) or
-    :data:`PARALLEL_MIN_SECONDS_LOOP` (the Python strip loop)."""
+def threads_for(seconds: float, compiled: bool = True) -> int:
+    """The threads of a pass over all pairs estimated at ``seconds`` on one thread: the
+    engine's (:func:`~kinred.dynamics.set_num_threads`), or one below
+    :data:`PARALLEL_MIN_SECONDS` (one compiled call per thread, ``compiled``) or
+    :data:`PARALLEL_MIN_SECONDS_LOOP` (a Python loop over strips). Also the certificate's
+    pair pass, with its own estimate."""
     least = PARALLEL_MIN_SECONDS if compiled else PARALLEL_MIN_SECONDS_LOOP
-    return _parallel.get_num_threads() if one_thread_seconds(n, dim, terms) >= least else 1
+    return _parallel.get_num_threads() if seconds >= least else 1
+
+
+def engine_threads(n: int, dim: int, terms: PairTerms, compiled: bool = True) -> int:
+    """The threads of one dense right-hand side: :func:`threads_for` of
+    :func:`one_thread_seconds` (``compiled``: the compiled strip worker runs it)."""
+    return threads_for(one_thread_seconds(n, dim, terms), compiled)
 
 
 def _fmt_seconds(secs: float) -> str:
