@@ -159,6 +159,38 @@ def test_smallest_k_is_the_stable_argsort(rows, cols, k, ties, nans, seed):
     assert np.array_equal(got, smallest_k_numpy(D, k))
 
 
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 700), d=st.integers(1, 7), h=st.integers(0, 6), ties=st.booleans(),
+       seed=st.integers(0, 2**16))
+def test_kd_order_splits_every_node_at_the_median_of_its_widest_coordinate(n, d, h, ties,
+                                                                           seed):
+    """The trees' row order (numba) is a permutation in which every node of depth t < h
+    (rows ``(i·n) >> t : ((i + 1)·n) >> t``) splits its rows between its two children at the
+    median of its widest coordinate; without ties its leaves hold the rows of its numpy
+    twin's (``np.argpartition``)."""
+    from kinred.distance._kernels import kd_order, kd_order_numpy
+
+    rng = np.random.default_rng(seed)
+    P = (rng.integers(0, 3, (n, d)).astype(float) if ties else
+         rng.normal(size=(n, d)) * rng.uniform(0.1, 10, d) + rng.normal(0, 1e4, d))
+    perm = np.arange(n, dtype=np.int64)
+    kd_order(P, h, perm)
+    assert np.array_equal(np.sort(perm), np.arange(n))
+    for t in range(h):
+        for i in range(1 << t):
+            s_, e, mid = (i * n) >> t, ((i + 1) * n) >> t, ((2 * i + 1) * n) >> (t + 1)
+            if e - s_ < 2 or mid <= s_ or mid >= e:
+                continue
+            Q = P[perm[s_:e]]
+            k = int(np.argmax(Q.max(axis=0) - Q.min(axis=0)))
+            assert Q[:mid - s_, k].max() <= Q[mid - s_:, k].min()
+    if not ties:
+        ref = kd_order_numpy(P, h)
+        for i in range(1 << h):
+            s_, e = (i * n) >> h, ((i + 1) * n) >> h
+            assert np.array_equal(np.sort(perm[s_:e]), np.sort(ref[s_:e]))
+
+
 def test_candidate_keys_are_deduplicated():
     """scipy's COO -> CSR sums repeated (i, j) entries: an edge listed twice would cost twice."""
     rng = np.random.default_rng(5)

@@ -32,15 +32,14 @@ def sorted_unique(keys: np.ndarray) -> np.ndarray:
 
 
 def first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
-    """Per group (0..n-1, every group present): the minimum of ``vals`` and its ``other``."""
-    order = np.lexsort((vals, group))
-    g = group[order]
-    first = np.ones(g.size, bool)
-    first[1:] = g[1:] != g[:-1]
+    """Per group (0..n-1, every group present): the minimum of ``vals`` and its ``other`` (of
+    ties, the first in the given order) -- by ``np.minimum.at`` and one masked scatter, linear
+    where a ``lexsort`` of the 1.2·10⁶ candidate edges took 0.24 s."""
     best = np.full(n, np.inf)
+    np.minimum.at(best, group, vals)
+    hit = np.flatnonzero(vals == best[group])[::-1]     # the first hit is written last
     arg = np.zeros(n, np.int64)
-    best[g[first]] = vals[order][first]
-    arg[g[first]] = other[order][first]
+    arg[group[hit]] = other[hit]
     return best, arg
 
 

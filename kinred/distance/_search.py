@@ -61,19 +61,36 @@ def _morton_order(Y: np.ndarray) -> np.ndarray:
     return np.argsort(code, kind="stable")
 
 
+def _depth(n: int, leaf: int) -> int:
+    """Depth of the complete binary tree over ``n`` rows whose leaves hold about ``leaf``."""
+    h = 0
+    while (n >> (h + 1)) >= leaf // 2 and (n >> (h + 1)) >= 1 and h < 40:
+        h += 1
+    return h
+
+
+def kd_permutation(P: np.ndarray, leaf: int = _LEAF) -> np.ndarray:
+    """The rows of ``P`` in the order of a k-d tree with leaves of about ``leaf`` rows
+    (:func:`kinred.distance._kernels.kd_order`): neighbours in space near each other."""
+    from ._kernels import kd_order
+
+    order = np.arange(P.shape[0], dtype=np.int64)
+    kd_order(np.ascontiguousarray(P, dtype=np.float64), _depth(P.shape[0], leaf), order)
+    return order
+
+
 class CTree:
-    """Complete binary tree over the rows of ``Y`` (Z-order, leaves of about 32 rows), with
-    every node's bounding box; :meth:`with_values` adds ``max v`` per node."""
+    """Complete binary tree over the rows of ``Y`` (a k-d tree: every node split at the median
+    of its widest coordinate, :func:`kinred.distance._kernels.kd_order`; leaves of about 32
+    rows), with every node's bounding box; :meth:`node_vmax` adds ``max v`` per node."""
 
     def __init__(self, Y: np.ndarray):
         n, d = Y.shape
-        self.order = _morton_order(Y)
+        h = _depth(n, _LEAF)
+        self.order = kd_permutation(Y)
         self.rank = np.empty_like(self.order)           # rank[order[p]] = p
         self.rank[self.order] = np.arange(n)
         self.Ys = np.ascontiguousarray(Y[self.order])
-        h = 0
-        while (n >> (h + 1)) >= _LEAF // 2 and (n >> (h + 1)) >= 1 and h < 40:
-            h += 1
         n_leaves = 1 << h
         self.first_leaf = n_leaves - 1
         self.starts = (np.arange(n_leaves + 1, dtype=np.int64) * n) >> h
