@@ -16,7 +16,10 @@ r1, max_leaves, open_rows, thr, cand)``
     ``[lo[k], hi[k]]`` of its rows and ``vmax[k] = max v`` over them, so
     ``dist(xᵢ, box) − vmax[k]`` is below every value of its rows and the node is skipped when
     that bound is not below the best value found (less a safety ``slack`` covering the
-    round-off of the bound). ``best``/``jbest`` enter as an upper bound and its minimizer
+    round-off of the bound). A node's bound is computed once, when it is stacked (its parent
+    needs it to visit the nearer child first), and kept beside it on the stack: half the box
+    distances of recomputing it when the node is taken (10⁵ rows in ℝ⁶: 1.12–1.18 → 0.75 s per
+    30 000 rows, the same results). ``best``/``jbest`` enter as an upper bound and its minimizer
     (from the candidate graph: a value that is attained) and are overwritten with the result.
     A row that would visit more than ``max_leaves`` leaves stops there: its ``best`` becomes
     the smallest bound of the nodes still open (a certified *lower* bound of its minimum, not
@@ -139,6 +142,7 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
     n_nodes = lo.shape[0]
     m = cand.shape[1]
     stack = np.empty(256, np.int64)
+    bound = np.empty(256)          # each stacked node's bound, computed once (when stacked)
     vals = np.empty(m)
     idx = np.empty(m, np.int64)
     for r in range(r0, r1):
@@ -151,6 +155,7 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
         t_i = thr[i]
         top = 1
         stack[0] = 0
+        bound[0] = _box_bound(x, lo, hi, 0) - vmax[0]
         leaves = 0
         while top > 0:
             # prune at the best value, or while collecting violators below thr[i], at the
@@ -161,7 +166,7 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
             if leaves >= max_leaves:          # stop: the frontier's bounds bound the minimum
                 lower = vals[0]
                 for q in range(top):
-                    lb = _box_bound(x, lo, hi, stack[q]) - vmax[stack[q]] - slack
+                    lb = bound[q] - slack
                     if lb < lower:
                         lower = lb
                 if lower < vals[0]:
@@ -170,7 +175,7 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
                 break
             top -= 1
             node = stack[top]
-            if _box_bound(x, lo, hi, node) - vmax[node] - slack >= cut:
+            if bound[top] - slack >= cut:
                 continue
             if node >= first_leaf:
                 leaves += 1
@@ -188,16 +193,17 @@ def ctransform_tree(X, Ys, vs, lo, hi, vmax, first_leaf, starts, best, jbest, sl
             c2 = c1 + 1
             if c2 >= n_nodes:
                 stack[top] = c1
+                bound[top] = _box_bound(x, lo, hi, c1) - vmax[c1]
                 top += 1
                 continue
             b1 = _box_bound(x, lo, hi, c1) - vmax[c1]
             b2 = _box_bound(x, lo, hi, c2) - vmax[c2]
             if b1 <= b2:
-                stack[top] = c2
-                stack[top + 1] = c1
+                stack[top], bound[top] = c2, b2
+                stack[top + 1], bound[top + 1] = c1, b1
             else:
-                stack[top] = c1
-                stack[top + 1] = c2
+                stack[top], bound[top] = c1, b1
+                stack[top + 1], bound[top + 1] = c2, b2
             top += 2
         best[i] = vals[0]
         jbest[i] = idx[0]
