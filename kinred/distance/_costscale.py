@@ -17,12 +17,12 @@ infeasible, :func:`kinred.distance._sparse.sparse_w1` adds a coupling of the ful
 Prices ε-optimal on the ``k``-nearest-neighbour graph only are not enough when the optimal plan
 of the full measures uses pairs outside it: the kept edges then hold the graph's optimum, and
 each round of column generation re-solves with a few of the missing pairs at a time. So the
-prices are **extended** (:func:`_extended`): after the late phases, ``search`` finds over
+prices are **extended** (:func:`_extended`): after every phase, ``search`` finds over
 *all* pairs those of reduced cost below ``−SEARCH_EPS·ε`` (the c-transform's bounded search,
 with the prices as duals), they join the graph, and the next phase prices them (after the
 last, the phase runs again warm from its prices and flow) -- column generation done on
 ε-optimal prices, where it is cheap, instead of on exact duals (10⁵ vs 8·10⁴ atoms in ℝ⁶:
-240 s and not closed before, 70–74 s exact with it).
+240 s and not closed before, 52 s exact with it).
 
 Nothing is lost if a guess is wrong: column generation adds every pair whose dual constraint
 fails, over all pairs, and the value is proved by the c-transform as always.
@@ -40,31 +40,36 @@ __all__ = ["prune", "PRUNE_EDGES"]
 #: takes a second or less on the whole graph).
 PRUNE_EDGES = 200_000
 
-#: The cost scaling's ε schedule, in units of the mean edge cost (as the auction's).
+#: The cost scaling's ε schedule, in units of the mean edge cost (as the auction's). The last
+#: phases are cheap (the first ones move the mass) and finer prices need fewer rounds of
+#: column generation on a smaller graph.
 EPS_START = 0.5
-EPS_END = 1e-4
+EPS_END = 3e-5
 THETA = 6.0
 
-#: Edges kept: reduced cost at most ``KEEP_EPS · ε_end`` (and the flow's support). The network
-#: simplex is sensitive to the few edges beyond the optimal plan's: 10⁵ vs 8·10⁴ weighted atoms
-#: in ℝ⁶, one solve on the 1.82·10⁵ edges kept at 6 takes 3.1–3.7 s, on 1.83·10⁵ (16) 4.5–5.9 s,
-#: on 1.88·10⁵ (40) 12–14 s, for the same three rounds (at 2: 2.4 s, but four rounds). Whole
-#: runs, interleaved: 73.0 and 65.4 s at 6, 76.8 and 72.9 s at 16.
-KEEP_EPS = 6.0
+#: Edges kept: reduced cost at most ``KEEP_EPS · ε_end`` (and the flow's support), i.e. within
+#: ``6·10⁻⁴`` of the mean edge cost. The network simplex is sensitive to the few edges beyond
+#: the optimal plan's: 10⁵ vs 8·10⁴ weighted atoms in ℝ⁶, with ``ε_end = 10⁻⁴``, one solve on
+#: the 1.82·10⁵ edges kept within ``6ε_end`` takes 3.1–3.7 s, on 1.83·10⁵ (``16ε_end``)
+#: 4.5–5.9 s, on 1.88·10⁵ (``40ε_end``) 12–14 s. With ``ε_end = 3·10⁻⁵`` and the same band,
+#: 2.0–2.4 s and three rounds: 51 s in all, against 60 s (five rounds) at ``10⁻⁴`` and 54 s
+#: (two rounds, a longer pricing) at ``10⁻⁵`` with ``KEEP_EPS = 60``.
+KEEP_EPS = 20.0
 
 #: Rounds of extending the prices to pairs outside the pool at the last phase
 #: (:func:`prune`'s ``search``).
 EXTEND_ROUNDS = 8
-#: The search for pairs outside the pool: reduced cost below ``−SEARCH_EPS·ε``, after each
-#: phase of ``ε ≤ EXTEND_FROM·unit``; after the last, below ``−SEARCH_EPS_LAST·ε`` (every
-#: pair where ε-optimality fails), until at most ``EXTEND_STOP·(n + m)`` are found.
+#: The search for pairs outside the pool: reduced cost below ``−SEARCH_EPS·ε``, after every
+#: phase; after the last, below ``−SEARCH_EPS_LAST·ε`` (every pair where ε-optimality fails),
+#: until at most ``EXTEND_STOP·(n + m)`` are found. From the first phase on: the missing pairs
+#: are found while ``ε`` is coarse, where pricing them is cheap. 10⁵ vs 8·10⁴ weighted atoms,
+#: the second cloud shifted by 0.05: in ℝ⁴, where the plan moves mass far beyond the
+#: ``k``-nearest-neighbour graph (390 000 pairs missing after the third phase), exact in 196 s
+#: where searching only from ``ε = 1.4·10⁻²·unit`` on ended at 210 s with a bracket (each late
+#: phase absorbing 200 000–400 000 pairs: 25–60 s); in ℝ⁶ (shift 0.02, the benchmark's case)
+#: 51.6 s against 52.0 s. Searching only from ``3·10⁻³`` on, that case took 86 s.
 SEARCH_EPS = 4.0
 SEARCH_EPS_LAST = 1.0
-#: Searching from ``ε = 1.4·10⁻²·unit`` on (one phase earlier than ``3·10⁻³``) finds the 27 000
-#: missing pairs while ``ε`` is coarse, where pricing them is cheap (10⁵ vs 8·10⁴ weighted
-#: atoms in ℝ⁶: the next two phases 7.8 + 8.7 s instead of 4.7 + 17.2 s; 73.7 s in all against
-#: 86 s; from ``8·10⁻²``, 90 s).
-EXTEND_FROM = 2e-2
 EXTEND_STOP = 1e-3
 
 #: A node counts as balanced within ``BALANCE·max weight`` (the prices only choose edges: mass
@@ -111,8 +116,8 @@ def prune(X, a, Y, b, keys: np.ndarray, deadline=None, run_until=None, search=No
 
 
 def _extended(X, a, Y, b, keys, cost, unit, deadline, run_until, search):
-    """The cost scaling phase by phase, its prices extended to all pairs: after each phase
-    from ``ε ≤ EXTEND_FROM·unit`` on, the pairs of reduced cost below ``−SEARCH_EPS·ε`` join
+    """The cost scaling phase by phase, its prices extended to all pairs: after every phase,
+    the pairs of reduced cost below ``−SEARCH_EPS·ε`` join
     the pool, and the next phase prices them (its start restores ε-optimality on them with
     the step in ``ε``); after the last phase, every pair where ε-optimality fails (reduced
     cost below ``−SEARCH_EPS_LAST·ε``) joins, and the phase runs again from its prices and
@@ -134,7 +139,7 @@ def _extended(X, a, Y, b, keys, cost, unit, deadline, run_until, search):
             if out is None:
                 return None
             px, py, flow = out
-            if search is None or eps > EXTEND_FROM * unit or rnd == EXTEND_ROUNDS:
+            if search is None or rnd == EXTEND_ROUNDS:
                 break
             slack = (SEARCH_EPS_LAST if last else SEARCH_EPS) * eps
             new = _absent(sorted_unique(search(keys, cost, px, py, slack)), keys)
