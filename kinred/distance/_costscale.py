@@ -22,7 +22,7 @@ prices are **extended** (:func:`_extended`): after every phase, ``search`` finds
 with the prices as duals), they join the graph, and the next phase prices them (after the
 last, the phase runs again warm from its prices and flow) -- column generation done on
 ε-optimal prices, where it is cheap, instead of on exact duals (10⁵ vs 8·10⁴ atoms in ℝ⁶:
-240 s and not closed before, 52 s exact with it).
+240 s and not closed before, 55–56 s exact with it).
 
 Nothing is lost if a guess is wrong: column generation adds every pair whose dual constraint
 fails, over all pairs, and the value is proved by the c-transform as always.
@@ -67,7 +67,7 @@ EXTEND_ROUNDS = 8
 #: ``k``-nearest-neighbour graph (390 000 pairs missing after the third phase), exact in 196 s
 #: where searching only from ``ε = 1.4·10⁻²·unit`` on ended at 210 s with a bracket (each late
 #: phase absorbing 200 000–400 000 pairs: 25–60 s); in ℝ⁶ (shift 0.02, the benchmark's case)
-#: 51.6 s against 52.0 s. Searching only from ``3·10⁻³`` on, that case took 86 s.
+#: 51.6–56.2 s against 52.0 s. Searching only from ``3·10⁻³`` on, that case took 86 s.
 SEARCH_EPS = 4.0
 SEARCH_EPS_LAST = 1.0
 EXTEND_STOP = 1e-3
