@@ -191,6 +191,28 @@ def test_kd_order_splits_every_node_at_the_median_of_its_widest_coordinate(n, d,
             assert np.array_equal(np.sort(perm[s_:e]), np.sort(ref[s_:e]))
 
 
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 40), extra=st.integers(0, 200), levels=st.integers(1, 6),
+       seed=st.integers(0, 2**16))
+def test_first_per_is_the_lexsort_minimum_with_ties_to_the_first(n, extra, levels, seed):
+    """The per-group minimum of the searches' start values and its column: the minimum of
+    each group, and of tied minima the first in the given order (as a stable lexsort)."""
+    from kinred.distance._costs import first_per
+
+    rng = np.random.default_rng(seed)
+    group = np.concatenate([np.arange(n), rng.integers(0, n, extra)])
+    rng.shuffle(group)
+    vals = rng.integers(0, levels, group.size).astype(float)
+    other = rng.integers(0, 10**6, group.size)
+    best, arg = first_per(group, n, vals, other)
+    order = np.lexsort((vals, group))
+    g = group[order]
+    first = np.ones(g.size, bool)
+    first[1:] = g[1:] != g[:-1]
+    assert np.array_equal(best[g[first]], vals[order][first])
+    assert np.array_equal(arg[g[first]], other[order][first])
+
+
 def test_candidate_keys_are_deduplicated():
     """scipy's COO -> CSR sums repeated (i, j) entries: an edge listed twice would cost twice."""
     rng = np.random.default_rng(5)

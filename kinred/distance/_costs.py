@@ -33,13 +33,18 @@ def sorted_unique(keys: np.ndarray) -> np.ndarray:
 
 def first_per(group: np.ndarray, n: int, vals: np.ndarray, other: np.ndarray):
     """Per group (0..n-1, every group present): the minimum of ``vals`` and its ``other`` (of
-    ties, the first in the given order) -- by ``np.minimum.at`` and one masked scatter, linear
-    where a ``lexsort`` of the 1.2·10⁶ candidate edges took 0.24 s."""
+    ties, the first in the given order) -- by ``np.minimum.at``, then a stable sort of the few
+    entries that attain their group's minimum: linear where a ``lexsort`` of the 1.2·10⁶
+    candidate edges took 0.24 s."""
     best = np.full(n, np.inf)
     np.minimum.at(best, group, vals)
-    hit = np.flatnonzero(vals == best[group])[::-1]     # the first hit is written last
+    hit = np.flatnonzero(vals == best[group])
+    hit = hit[np.argsort(group[hit], kind="stable")]
+    g = group[hit]
+    first = np.ones(hit.size, bool)
+    first[1:] = g[1:] != g[:-1]
     arg = np.zeros(n, np.int64)
-    arg[group[hit]] = other[hit]
+    arg[g[first]] = other[hit[first]]
     return best, arg
 
 
