@@ -69,25 +69,18 @@ def _depth(n: int, leaf: int) -> int:
     return h
 
 
-def kd_permutation(P: np.ndarray, leaf: int = _LEAF) -> np.ndarray:
-    """The rows of ``P`` in the order of a k-d tree with leaves of about ``leaf`` rows
-    (:func:`kinred.distance._kernels.kd_order`): neighbours in space near each other."""
-    from ._kernels import kd_order
-
-    order = np.arange(P.shape[0], dtype=np.int64)
-    kd_order(np.ascontiguousarray(P, dtype=np.float64), _depth(P.shape[0], leaf), order)
-    return order
-
-
 class CTree:
     """Complete binary tree over the rows of ``Y`` (a k-d tree: every node split at the median
     of its widest coordinate, :func:`kinred.distance._kernels.kd_order`; leaves of about 32
     rows), with every node's bounding box; :meth:`node_vmax` adds ``max v`` per node."""
 
     def __init__(self, Y: np.ndarray):
+        from ._kernels import kd_order
+
         n, d = Y.shape
         h = _depth(n, _LEAF)
-        self.order = kd_permutation(Y)
+        self.order = np.arange(n, dtype=np.int64)
+        kd_order(np.ascontiguousarray(Y, dtype=np.float64), h, self.order)
         self.rank = np.empty_like(self.order)           # rank[order[p]] = p
         self.rank[self.order] = np.arange(n)
         self.Ys = np.ascontiguousarray(Y[self.order])
